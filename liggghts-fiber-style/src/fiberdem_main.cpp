@@ -1,0 +1,88 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fiberdem: the fiberform DEM driver. It is LIGGGHTS (Debian's libliggghts) with the project's
+   styles registered at start-up. It accepts the same command-line flags as `liggghts`
+   (-in, -var, -log, -echo, -screen, ...) and runs under mpirun.
+
+   fiberdem -h         lists the project's styles (one line each) and the flags
+   fiberdem --version  prints the fiberform and LIGGGHTS versions */
+#include <mpi.h>
+
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "abi_guard.h"
+#include "input.h"
+#include "lammps.h"
+#include "style_registry.h"
+#include "universe.h"
+
+namespace {
+
+void print_help() {
+  std::printf(
+      "fiberdem %s: LIGGGHTS with the fiberform styles registered\n\n"
+      "Usage: fiberdem [liggghts flags] -in INPUT\n"
+      "  -in FILE, -var NAME VALUE, -log FILE|none, -echo none|screen|log|both, -screen FILE|none\n"
+      "  (all flags of `liggghts -h` are accepted and passed on)\n"
+      "  -h, --help       this list\n"
+      "  --version        fiberform and LIGGGHTS versions\n\n"
+      "fiberform styles:\n",
+      FIBERFORM_VERSION);
+  fiberform::print_style_list(stdout);
+  std::printf("\nUnits: the styles are written for `units si` (m, kg, s, N).\n");
+}
+
+bool has_flag(int argc, char **argv, const char *a, const char *b = nullptr) {
+  for (int i = 1; i < argc; ++i)
+    if (std::strcmp(argv[i], a) == 0 || (b && std::strcmp(argv[i], b) == 0)) return true;
+  return false;
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  MPI_Init(&argc, &argv);
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+
+  if (has_flag(argc, argv, "-h", "--help") || has_flag(argc, argv, "-help")) {
+    if (rank == 0) print_help();
+    MPI_Finalize();
+    return 0;
+  }
+
+  const bool version_only = has_flag(argc, argv, "--version");
+  std::string quiet[] = {"fiberdem", "-screen", "none", "-log", "none"};
+  char *quiet_argv[5];
+  for (int i = 0; i < 5; ++i) quiet_argv[i] = quiet[i].data();
+
+  auto *lmp = version_only ? new LAMMPS_NS::LAMMPS(5, quiet_argv, MPI_COMM_WORLD)
+                           : new LAMMPS_NS::LAMMPS(argc, argv, MPI_COMM_WORLD);
+
+  const std::string abi = fiberform::check_library_layout(lmp);
+  if (!abi.empty()) {
+    if (rank == 0)
+      std::fprintf(stderr,
+                   "fiberdem: ABI guard: the LIGGGHTS headers this driver was compiled with do not "
+                   "match the installed libliggghts (%s). Reinstall libliggghts-dev for the same "
+                   "version as liggghts and rebuild (make setup).\n",
+                   abi.c_str());
+    MPI_Abort(MPI_COMM_WORLD, 3);
+  }
+
+  if (version_only) {
+    if (rank == 0)
+      std::printf("fiberdem %s\nLIGGGHTS %s\n", FIBERFORM_VERSION, lmp->universe->version);
+    delete lmp;
+    MPI_Finalize();
+    return 0;
+  }
+
+  if (!fiberform::register_styles(lmp)) MPI_Abort(MPI_COMM_WORLD, 3);
+
+  lmp->input->file();
+  delete lmp;
+  MPI_Finalize();
+  return 0;
+}

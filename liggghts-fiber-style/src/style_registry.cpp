@@ -1,0 +1,83 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fiberform: THE registrar. Every style of the project is listed here, once, with one line of
+   description; `fiberdem -h` prints this list. To add a style: include its header and add a row. */
+#include "style_registry.h"
+
+#include <cstring>
+
+#include "force.h"
+#include "lammps.h"
+#include "modify.h"
+#include "modify_access.h"
+
+// ---- style headers (one class per style, one file pair per class) ----
+#include "pair_test_harmonic.h"
+
+namespace fiberform {
+namespace {
+
+template <class T>
+LAMMPS_NS::Pair *make_pair(LAMMPS_NS::LAMMPS *lmp) { return new T(lmp); }
+template <class T>
+LAMMPS_NS::Fix *make_fix(LAMMPS_NS::LAMMPS *lmp, int narg, char **arg) { return new T(lmp, narg, arg); }
+template <class T>
+LAMMPS_NS::Compute *make_compute(LAMMPS_NS::LAMMPS *lmp, int iarg, int narg, char **arg) {
+  return new T(lmp, iarg, narg, arg);
+}
+
+const StyleEntry kStyles[] = {
+    {StyleKind::Pair, "test/harmonic",
+     "harmonic repulsion F = K*overlap between spheres (test and demo style)",
+     &make_pair<LAMMPS_NS::PairTestHarmonic>, nullptr, nullptr},
+};
+
+const char *kind_name(StyleKind k) {
+  switch (k) {
+    case StyleKind::Pair: return "pair_style";
+    case StyleKind::Fix: return "fix";
+    case StyleKind::Compute: return "compute";
+  }
+  return "?";
+}
+
+}  // namespace
+
+const StyleEntry *style_begin() { return kStyles; }
+const StyleEntry *style_end() { return kStyles + sizeof(kStyles) / sizeof(kStyles[0]); }
+
+bool register_styles(LAMMPS_NS::LAMMPS *lmp) {
+  auto &pairs = *lmp->force->pair_map;
+  auto &fixes = fix_map(lmp->modify);
+  auto &computes = compute_map(lmp->modify);
+  bool ok = true;
+  for (const StyleEntry *s = style_begin(); s != style_end(); ++s) {
+    bool clash = false;
+    switch (s->kind) {
+      case StyleKind::Pair:
+        clash = pairs.count(s->name) != 0;
+        if (!clash) pairs[s->name] = s->make_pair;
+        break;
+      case StyleKind::Fix:
+        clash = fixes.count(s->name) != 0;
+        if (!clash) fixes[s->name] = s->make_fix;
+        break;
+      case StyleKind::Compute:
+        clash = computes.count(s->name) != 0;
+        if (!clash) computes[s->name] = s->make_compute;
+        break;
+    }
+    if (clash) {
+      std::fprintf(stderr, "fiberdem: %s %s already exists in LIGGGHTS; refusing to shadow it\n",
+                   kind_name(s->kind), s->name);
+      ok = false;
+    }
+  }
+  return ok;
+}
+
+void print_style_list(std::FILE *out) {
+  for (const StyleEntry *s = style_begin(); s != style_end(); ++s)
+    std::fprintf(out, "  %-11s %-24s %s\n", kind_name(s->kind), s->name, s->description);
+}
+
+}  // namespace fiberform

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-3.0-or-later
+# Runs every test of the project: the C++ unit tests (ctest) and the pytest suite, then prints
+# ONE summary line "N passed, M failed" counting both. Exit status 0 only if everything passed.
+# Usage: run-tests.sh BUILD_DIR [--validate]   (--validate adds the long validation runs)
+set -uo pipefail
+build=${1:-build}
+shift || true
+mode=${1:-}
+root=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$root"
+logdir="$build/test-logs"
+mkdir -p "$logdir"
+
+echo "== ctest (C++ unit tests) =="
+ctest --test-dir "$build" --output-on-failure -j 2 2>&1 | tee "$logdir/ctest.log"
+ctest_rc=${PIPESTATUS[0]}
+c_total=$(grep -Eo 'tests passed, [0-9]+ tests failed out of [0-9]+' "$logdir/ctest.log" | grep -Eo '[0-9]+$' | tail -1)
+c_failed=$(grep -Eo '[0-9]+ tests failed out of' "$logdir/ctest.log" | grep -Eo '^[0-9]+' | tail -1)
+c_total=${c_total:-0}
+c_failed=${c_failed:-0}
+c_passed=$((c_total - c_failed))
+
+echo "== pytest =="
+marker=()
+if [[ "$mode" != "--validate" ]]; then marker=(-m "not validation"); fi
+"$root/.venv/bin/python" -m pytest tests "${marker[@]}" -p no:cacheprovider \
+  --junitxml="$logdir/pytest.xml" -q -rfE 2>&1 | tee "$logdir/pytest.log"
+py_rc=${PIPESTATUS[0]}
+read -r p_passed p_failed p_skipped < <("$root/.venv/bin/python" - "$logdir/pytest.xml" <<'PY'
+import sys, xml.etree.ElementTree as ET
+suites = ET.parse(sys.argv[1]).getroot()
+suites = [suites] if suites.tag == "testsuite" else list(suites)
+tests = sum(int(s.get("tests", 0)) for s in suites)
+failed = sum(int(s.get("failures", 0)) + int(s.get("errors", 0)) for s in suites)
+skipped = sum(int(s.get("skipped", 0)) for s in suites)
+print(tests - failed - skipped, failed, skipped)
+PY
+)
+p_passed=${p_passed:-0}; p_failed=${p_failed:-0}; p_skipped=${p_skipped:-0}
+
+passed=$((c_passed + p_passed))
+failed=$((c_failed + p_failed))
+[[ $ctest_rc -ne 0 && $c_failed -eq 0 ]] && failed=$((failed + 1))   # ctest itself failed to run
+[[ $py_rc -ne 0 && $py_rc -ne 5 && $p_failed -eq 0 ]] && failed=$((failed + 1))
+echo
+echo "ctest: $c_passed passed, $c_failed failed; pytest: $p_passed passed, $p_failed failed, $p_skipped skipped"
+echo "$passed passed, $failed failed, $p_skipped skipped"
+if [[ $failed -ne 0 || $((passed)) -eq 0 ]]; then exit 1; fi
+exit 0
