@@ -121,3 +121,24 @@ def test_bad_input_fails_with_liggghts_error(tmp_path: Path) -> None:
                           env=_env(), capture_output=True, text=True, timeout=60)
     assert proc.returncode != 0
     assert "K (N/m) must be a finite number > 0" in proc.stdout + proc.stderr
+
+
+def test_stock_liggghts_with_preload_shim_matches_fiberdem(tmp_path: Path) -> None:
+    """The LD_PRELOAD shim makes Debian's stock `liggghts` binary accept our styles; without it the
+    stock binary does not know them."""
+    shim = _fiberdem().parent.parent / "lib" / "libfiberform_preload.so"
+    liggghts = shutil.which("liggghts")
+    assert liggghts is not None and shim.exists()
+    cmd = [liggghts, "-in", str(EXAMPLE), "-log", "none", "-screen", "none"]
+
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    proc = subprocess.run(cmd, cwd=plain, env=_env(), capture_output=True, text=True, timeout=60)
+    assert proc.returncode != 0 and not (plain / "final.dump").exists()
+
+    shimmed = tmp_path / "shim"
+    shimmed.mkdir()
+    subprocess.run(cmd, cwd=shimmed, env={**_env(), "LD_PRELOAD": str(shim)}, check=True,
+                   capture_output=True, text=True, timeout=60)
+    _run(tmp_path / "fiberdem", 1)
+    assert np.array_equal(_final_state(shimmed), _final_state(tmp_path / "fiberdem"))
