@@ -44,7 +44,7 @@ venv: packages
 	@bash scripts/setup/python-venv.sh
 
 demo: setup
-	$(FIBERFORM) demo $(SCENE)
+	$(FIBERFORM) run $(SCENE)
 
 test: setup
 	@bash scripts/setup/run-tests.sh $(BUILD)

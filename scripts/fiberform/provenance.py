@@ -1,0 +1,146 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Provenance of stage products and atomic writes.
+
+Every stage HDF5 file records on its root group (after signac's h5store and pyiron's job groups):
+
+=================  ==========================================================
+attribute          meaning
+=================  ==========================================================
+``stage``          stage name (``demo-particles``)
+``fiberform``      package version, e.g. ``0.1.0``
+``git_revision``   short commit, ``-dirty`` if modified, ``unknown`` outside git
+``scene_json``     the validated scene, defaults filled in, as canonical JSON
+``seed``           the scene's seed
+``input_hashes``   JSON object: input name -> ``sha256:<hex>``
+``created_utc``    ISO 8601 time of writing
+``options``        JSON object of the command-line options that shaped the run
+=================  ==========================================================
+
+Datasets written through :func:`write_dataset` carry ``units`` (and ``description``) attributes.
+Files are written as ``<file>.in_progress`` and renamed with :func:`os.replace` when complete, so a
+product that exists is whole.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+
+from ._versions import git_revision, package_version
+from .scene import Scene
+
+__all__ = [
+    "IN_PROGRESS",
+    "atomic_h5",
+    "atomic_write_text",
+    "file_hash",
+    "in_progress_path",
+    "read_provenance",
+    "text_hash",
+    "write_dataset",
+    "write_provenance",
+]
+
+IN_PROGRESS = ".in_progress"
+
+
+def in_progress_path(path: Path) -> Path:
+    """``particles.h5`` -> ``particles.h5.in_progress``."""
+    return path.with_name(path.name + IN_PROGRESS)
+
+
+def text_hash(text: str | bytes) -> str:
+    data = text.encode() if isinstance(text, str) else text
+    return "sha256:" + hashlib.sha256(data).hexdigest()
+
+
+def file_hash(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return "sha256:" + h.hexdigest()
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``path`` through ``<path>.in_progress`` and a rename."""
+    tmp = in_progress_path(path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+@contextmanager
+def atomic_h5(path: Path) -> Iterator[h5py.File]:
+    """Open ``<path>.in_progress`` for writing; rename to ``path`` if the block succeeds,
+    delete it if the block raises."""
+    tmp = in_progress_path(path)
+    tmp.unlink(missing_ok=True)
+    try:
+        with h5py.File(tmp, "w") as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_provenance(
+    f: h5py.File,
+    stage: str,
+    scene: Scene,
+    input_hashes: Mapping[str, str],
+    options: Mapping[str, Any] | None = None,
+) -> None:
+    """Write the provenance attributes (see the module docstring) on the root group."""
+    f.attrs["stage"] = stage
+    f.attrs["fiberform"] = package_version()
+    f.attrs["git_revision"] = git_revision()
+    f.attrs["scene_json"] = scene.to_json()
+    f.attrs["seed"] = np.int64(scene.seed)
+    f.attrs["input_hashes"] = json.dumps(dict(input_hashes), sort_keys=True)
+    f.attrs["created_utc"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    f.attrs["options"] = json.dumps(dict(options or {}), sort_keys=True)
+
+
+def read_provenance(path: Path) -> dict[str, Any]:
+    """The root attributes of a stage file, JSON attributes decoded. Raises OSError if the
+    file cannot be read as HDF5."""
+    out: dict[str, Any] = {}
+    with h5py.File(path, "r") as f:
+        for key, value in f.attrs.items():
+            if isinstance(value, bytes):
+                value = value.decode()
+            if key in ("input_hashes", "options") and isinstance(value, str):
+                value = json.loads(value)
+            elif isinstance(value, np.generic):
+                value = value.item()
+            out[key] = value
+    return out
+
+
+def write_dataset(
+    group: h5py.Group,
+    name: str,
+    data: npt.ArrayLike,
+    units: str,
+    description: str,
+) -> h5py.Dataset:
+    """A dataset with ``units`` (``"1"`` for dimensionless) and ``description`` attributes."""
+    ds = group.create_dataset(name, data=np.asarray(data))
+    ds.attrs["units"] = units
+    ds.attrs["description"] = description
+    return ds

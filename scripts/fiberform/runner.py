@@ -1,0 +1,294 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The one place where fiberform starts external programs (fiberdem, OpenFOAM tools, mpirun).
+
+* The command is a list of arguments; no shell is ever involved.
+* ``ranks > 1`` prefixes ``mpirun -np N``; more ranks than cores is refused unless the caller
+  passes ``oversubscribe=True`` (busy-waiting oversubscribed ranks double the run time).
+* The environment gets ``OMPI_ALLOW_RUN_AS_ROOT=1`` and ``OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1`` (so
+  mpirun works as root without ``--allow-run-as-root`` on the command line) and
+  ``WM_PROJECT_DIR=/usr/share/openfoam`` unless already set (every OpenFOAM binary needs it).
+* Standard output and error are streamed, merged, to the log file (``log.<tool>`` in the stage
+  folder, as OpenFOAM's ``runApplication`` does).
+* On a terminal, a rich progress bar shows the fraction reported by an optional ``progress``
+  callback that reads log lines (see :func:`liggghts_progress`, :func:`openfoam_progress`).
+* A non-zero exit raises :class:`~fiberform.errors.RunError` with the command, the exit status and
+  the last lines of the log.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    Progress,
+    SpinnerColumn,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from .errors import ConfigError, RunError
+
+__all__ = [
+    "OPENFOAM_PROJECT_DIR",
+    "ProgressParser",
+    "RunResult",
+    "build_command",
+    "build_env",
+    "capture",
+    "liggghts_progress",
+    "openfoam_progress",
+    "run",
+]
+
+OPENFOAM_PROJECT_DIR = "/usr/share/openfoam"
+
+#: Reads one log line; returns the fraction done (0..1) or None if the line says nothing about it.
+ProgressParser = Callable[[str], float | None]
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What :func:`run` returns for a successful run."""
+
+    cmd: tuple[str, ...]
+    returncode: int
+    log: Path
+    elapsed_s: float
+
+
+def _cores() -> int:
+    return os.cpu_count() or 1
+
+
+def build_command(cmd: Sequence[str], ranks: int = 1, oversubscribe: bool = False) -> list[str]:
+    """The argument list actually started: ``cmd`` itself, or ``mpirun -np N`` + ``cmd``."""
+    if isinstance(cmd, (str, bytes)) or not cmd:
+        raise ConfigError("a command is a non-empty list of arguments, not a string")
+    if not all(isinstance(a, str) for a in cmd):
+        raise ConfigError(f"every argument must be a str: {list(cmd)!r}")
+    if isinstance(ranks, bool) or not isinstance(ranks, int) or ranks < 1:
+        raise ConfigError(f"ranks must be an integer >= 1, got {ranks!r}")
+    cores = _cores()
+    if ranks > cores and not oversubscribe:
+        raise ConfigError(
+            f"{ranks} MPI ranks requested but this machine has {cores} cores; "
+            "lower run.ranks or pass --oversubscribe"
+        )
+    if ranks == 1:
+        return list(cmd)
+    mpirun = shutil.which("mpirun")
+    if mpirun is None:
+        raise ConfigError("mpirun not found on PATH (install openmpi-bin) but ranks > 1")
+    prefix = [mpirun, "-np", str(ranks)]
+    if ranks > cores:
+        prefix.append("--oversubscribe")
+    return prefix + list(cmd)
+
+
+def build_env(env_extra: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment of a run: ours plus Open MPI's root permission and WM_PROJECT_DIR."""
+    env = dict(os.environ)
+    env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
+    env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
+    env.setdefault("WM_PROJECT_DIR", OPENFOAM_PROJECT_DIR)
+    for key, value in (env_extra or {}).items():
+        if not isinstance(key, str) or not isinstance(value, str) or "=" in key or not key:
+            raise ConfigError(f"bad environment entry {key!r}={value!r}")
+        env[key] = value
+    return env
+
+
+def _progress_display(description: str, console: Console) -> Progress:
+    return Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TaskProgressColumn(),
+        TimeElapsedColumn(),
+        TextColumn("left"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    )
+
+
+def run(
+    cmd: Sequence[str],
+    log: Path,
+    cwd: Path | None = None,
+    env_extra: Mapping[str, str] | None = None,
+    ranks: int = 1,
+    progress: ProgressParser | None = None,
+    *,
+    oversubscribe: bool = False,
+    description: str | None = None,
+    tail_lines: int = 30,
+    timeout_s: float | None = None,
+    show_progress: bool | None = None,
+) -> RunResult:
+    """Run ``cmd`` (on ``ranks`` MPI ranks), stream its output into ``log``, raise on failure.
+
+    ``log`` is relative to ``cwd`` if not absolute. ``show_progress`` defaults to "stderr is a
+    terminal". ``timeout_s`` ends the whole process group when exceeded.
+    """
+    full = build_command(cmd, ranks, oversubscribe)
+    env = build_env(env_extra)
+    workdir = Path(cwd) if cwd is not None else Path.cwd()
+    log_path = log if log.is_absolute() else workdir / log
+    if "/" not in full[0] and shutil.which(full[0], path=env.get("PATH")) is None:
+        raise RunError(
+            full, None, str(log_path), [], reason=f"program {full[0]!r} not found on PATH"
+        )
+    console = Console(stderr=True)
+    if show_progress is None:
+        show_progress = console.is_terminal
+    tail: deque[str] = deque(maxlen=tail_lines)
+    start = time.monotonic()
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(log_path, "w", encoding="utf-8", errors="replace") as logf:
+        try:
+            proc = subprocess.Popen(
+                full,
+                cwd=workdir,
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+                errors="replace",
+                bufsize=1,
+                start_new_session=True,
+            )
+        except OSError as exc:
+            raise RunError(full, None, str(log_path), [], reason=str(exc)) from None
+        name = description or Path(cmd[0]).name
+        display = _progress_display(name, console)
+        task = display.add_task(name, total=1.0 if progress else None)
+        parser = progress
+        done = 0.0
+        timed_out = threading.Event()
+
+        def on_timeout() -> None:
+            timed_out.set()
+            _kill(proc)
+
+        timer = threading.Timer(timeout_s, on_timeout) if timeout_s is not None else None
+        try:
+            if timer is not None:
+                timer.daemon = True
+                timer.start()
+            if show_progress:
+                display.start()
+            assert proc.stdout is not None
+            for line in proc.stdout:
+                logf.write(line)
+                text = line.rstrip("\n")
+                tail.append(text)
+                if parser is not None:
+                    try:
+                        frac = parser(text)
+                    except Exception:  # a broken parser must not break the run
+                        parser = None
+                        frac = None
+                    if frac is not None and frac > done:
+                        done = min(1.0, frac)
+                        display.update(task, completed=done)
+            returncode = proc.wait()
+        except BaseException:
+            _kill(proc)
+            proc.wait()
+            raise
+        finally:
+            if timer is not None:
+                timer.cancel()
+            if show_progress:
+                display.stop()
+    elapsed = time.monotonic() - start
+    if timed_out.is_set():
+        raise RunError(
+            full, returncode, str(log_path), list(tail), reason=f"timed out after {timeout_s:g} s"
+        )
+    if returncode != 0:
+        raise RunError(full, returncode, str(log_path), list(tail))
+    return RunResult(tuple(full), returncode, log_path, elapsed)
+
+
+def _kill(proc: subprocess.Popen[str]) -> None:
+    """End the process and its children (mpirun ranks): it leads its own session."""
+    if proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def capture(cmd: Sequence[str], cwd: Path | None = None, timeout_s: float = 10.0) -> str | None:
+    """Standard output of a short query (``git rev-parse``, ``dpkg-query``), or None if the
+    program is missing, fails or times out. For runs with logs use :func:`run`."""
+    if isinstance(cmd, (str, bytes)) or not cmd:
+        raise ConfigError("a command is a non-empty list of arguments, not a string")
+    try:
+        done = subprocess.run(
+            list(cmd),
+            cwd=cwd,
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            errors="replace",
+            timeout=timeout_s,
+            check=False,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return done.stdout if done.returncode == 0 else None
+
+
+def liggghts_progress(total_steps: int) -> ProgressParser:
+    """Progress from LIGGGHTS thermo lines: rows of numbers whose first column is the step."""
+
+    def parse(line: str) -> float | None:
+        parts = line.split()
+        if not parts or not parts[0].isdigit():
+            return None
+        try:
+            [float(p) for p in parts[1:]]
+        except ValueError:
+            return None
+        return int(parts[0]) / total_steps if total_steps > 0 else None
+
+    return parse
+
+
+_FOAM_TIME = re.compile(r"^Time = ([-+0-9.eE]+)\s*$")
+
+
+def openfoam_progress(start_time: float, end_time: float) -> ProgressParser:
+    """Progress from OpenFOAM solver logs (lines ``Time = <t>``)."""
+    span = end_time - start_time
+
+    def parse(line: str) -> float | None:
+        m = _FOAM_TIME.match(line)
+        if m is None or span <= 0:
+            return None
+        return (float(m.group(1)) - start_time) / span
+
+    return parse

@@ -1,0 +1,165 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The stage mechanism (after signac/row): declared products, skip when up to date, atomic output.
+
+A stage lives in ``<output_dir>/<folder>/``. Its products are files in that folder; the first one
+is the stage's HDF5 file, which is written last and marks completion. A run
+
+1. checks the scene (schema, required sections, the stage's own checks) and writes nothing if it
+   is bad (:class:`~fiberform.errors.SceneError`, exit status 2);
+2. computes hashes of its inputs (scene sections, generated input text, binaries, upstream files);
+3. returns early if every product exists and the HDF5 file records the same input hashes,
+   unless ``force``;
+4. checks its environment (:meth:`Stage.preflight`: binaries present, ranks possible);
+5. removes stale products, lets the stage write ``<product>.in_progress`` files, and renames them
+   (the HDF5 file last) when all succeeded; on failure the ``.in_progress`` files are deleted.
+"""
+
+from __future__ import annotations
+
+import abc
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import h5py
+
+from ..errors import SceneError
+from ..provenance import (
+    in_progress_path,
+    read_provenance,
+    text_hash,
+    write_provenance,
+)
+from ..scene import Scene, section_hash
+
+__all__ = ["Outcome", "Stage", "StageContext"]
+
+
+@dataclass
+class StageContext:
+    """Everything a stage run may depend on besides the stage's own code."""
+
+    scene: Scene
+    scene_path: Path
+    build_dir: Path
+    force: bool = False
+    oversubscribe: bool = False
+    show_progress: bool | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Result of :meth:`Stage.execute`."""
+
+    stage: str
+    skipped: bool
+    products: tuple[Path, ...]
+    elapsed_s: float
+    message: str
+
+
+class Stage(abc.ABC):
+    """Base class of stages. Subclasses set the class attributes and implement
+    :meth:`produce`; they may extend :meth:`check_scene` and :meth:`input_hashes`."""
+
+    #: CLI command name, e.g. ``demo-particles``.
+    name: ClassVar[str]
+    #: One-line help text.
+    summary: ClassVar[str]
+    #: Folder under the scene's output_dir.
+    folder: ClassVar[str]
+    #: Scene sections that must be present.
+    requires: ClassVar[tuple[str, ...]]
+    #: Top-level scene entries whose values are inputs (hashed).
+    uses: ClassVar[tuple[str, ...]]
+    #: Product file names in the stage folder; ``products[0]`` is the HDF5 file.
+    products: ClassVar[tuple[str, ...]]
+    #: Bump to invalidate products written by older code.
+    code_version: ClassVar[int] = 1
+
+    # -- paths ---------------------------------------------------------------------------------
+
+    def stage_dir(self, ctx: StageContext) -> Path:
+        return ctx.scene.output_path / self.folder
+
+    def product_paths(self, ctx: StageContext) -> tuple[Path, ...]:
+        d = self.stage_dir(ctx)
+        return tuple(d / p for p in self.products)
+
+    # -- checks and hashes ---------------------------------------------------------------------
+
+    def check_scene(self, scene: Scene) -> list[str]:
+        """Problems beyond the schema, one line each naming the field path. The base checks
+        that the required sections are present."""
+        problems = []
+        for section in self.requires:
+            if getattr(scene, section) is None:
+                problems.append(f"{section}: required but missing (stage {self.name} needs it)")
+        return problems
+
+    def validate(self, ctx: StageContext) -> None:
+        problems = self.check_scene(ctx.scene)
+        if problems:
+            raise SceneError(str(ctx.scene_path), problems)
+
+    def preflight(self, ctx: StageContext) -> None:  # noqa: B027 - optional hook
+        """Check the environment (binaries present, ...) before anything is written; raise
+        StageError or ConfigError. The base does nothing."""
+
+    def input_hashes(self, ctx: StageContext) -> dict[str, str]:
+        """Hashes of everything the products depend on. Subclasses add their own entries."""
+        return {
+            "scene": section_hash(ctx.scene, self.uses),
+            "stage_code": text_hash(f"{self.name}:{self.code_version}"),
+        }
+
+    def up_to_date(self, ctx: StageContext, hashes: Mapping[str, str]) -> bool:
+        paths = self.product_paths(ctx)
+        if not all(p.is_file() for p in paths):
+            return False
+        try:
+            prov = read_provenance(paths[0])
+        except OSError:
+            return False
+        return prov.get("stage") == self.name and prov.get("input_hashes") == dict(hashes)
+
+    # -- running -------------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def produce(
+        self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str]
+    ) -> None:
+        """Do the work. Write datasets into ``h5`` (provenance is already on its root) and the
+        other products to ``tmp[name]`` (their ``.in_progress`` paths)."""
+
+    def execute(self, ctx: StageContext) -> Outcome:
+        start = time.monotonic()
+        self.validate(ctx)
+        hashes = self.input_hashes(ctx)
+        if not ctx.force and self.up_to_date(ctx, hashes):
+            return Outcome(self.name, True, self.product_paths(ctx), time.monotonic() - start,
+                           "up to date")  # fmt: skip
+        self.preflight(ctx)
+        paths = self.product_paths(ctx)
+        stage_dir = self.stage_dir(ctx)
+        stage_dir.mkdir(parents=True, exist_ok=True)
+        for p in paths:
+            p.unlink(missing_ok=True)
+        tmp = {p.name: in_progress_path(p) for p in paths}
+        try:
+            for t in tmp.values():
+                t.unlink(missing_ok=True)
+            with h5py.File(tmp[paths[0].name], "w") as h5:
+                write_provenance(h5, self.name, ctx.scene, hashes, ctx.options)
+                self.produce(ctx, h5, tmp, hashes)
+            for p in paths[1:]:
+                tmp[p.name].replace(p)
+            tmp[paths[0].name].replace(paths[0])
+        except BaseException:
+            for t in tmp.values():
+                t.unlink(missing_ok=True)
+            raise
+        return Outcome(self.name, False, paths, time.monotonic() - start, "done")

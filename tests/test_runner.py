@@ -1,0 +1,177 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""fiberform.runner with real programs (/bin/sh, mpirun): logs, errors, environment, ranks."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from fiberform.errors import ConfigError, RunError
+from fiberform.runner import (
+    build_command,
+    build_env,
+    capture,
+    liggghts_progress,
+    openfoam_progress,
+    run,
+)
+
+SH = "/bin/sh"
+PACKAGE = Path(__file__).resolve().parents[1] / "scripts" / "fiberform"
+
+
+def test_output_goes_to_the_log(tmp_path: Path) -> None:
+    result = run([SH, "-c", "echo out; echo err >&2"], Path("log.sh"), cwd=tmp_path)
+    assert result.returncode == 0
+    assert result.log == tmp_path / "log.sh"
+    assert (tmp_path / "log.sh").read_text().split() == ["out", "err"]
+
+
+def test_failure_raises_with_command_status_and_tail(tmp_path: Path) -> None:
+    with pytest.raises(RunError) as info:
+        run([SH, "-c", "echo hi; exit 3"], Path("log.sh"), cwd=tmp_path)
+    err = info.value
+    assert err.returncode == 3
+    assert err.tail == ["hi"]
+    text = str(err)
+    assert "/bin/sh -c echo hi; exit 3" in text
+    assert "status 3" in text
+    assert "| hi" in text
+    assert str(tmp_path / "log.sh") in text
+    assert (tmp_path / "log.sh").read_text() == "hi\n"
+
+
+def test_tail_is_the_last_30_lines(tmp_path: Path) -> None:
+    with pytest.raises(RunError) as info:
+        run([SH, "-c", 'i=1; while [ $i -le 100 ]; do echo "line $i"; i=$((i+1)); done; exit 1'],
+            Path("log.sh"), cwd=tmp_path)  # fmt: skip
+    tail = info.value.tail
+    assert len(tail) == 30
+    assert tail[0] == "line 71" and tail[-1] == "line 100"
+    assert "| line 70" not in str(info.value) and "| line 71" in str(info.value)
+    assert len((tmp_path / "log.sh").read_text().splitlines()) == 100
+
+
+def test_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("WM_PROJECT_DIR", raising=False)
+    script = 'echo "$OMPI_ALLOW_RUN_AS_ROOT $OMPI_ALLOW_RUN_AS_ROOT_CONFIRM $WM_PROJECT_DIR $FOO"'
+    run([SH, "-c", script],
+        Path("log.env"), cwd=tmp_path, env_extra={"FOO": "bar"})  # fmt: skip
+    assert (tmp_path / "log.env").read_text().strip() == "1 1 /usr/share/openfoam bar"
+    monkeypatch.setenv("WM_PROJECT_DIR", "/elsewhere")
+    assert build_env()["WM_PROJECT_DIR"] == "/elsewhere"
+    with pytest.raises(ConfigError):
+        build_env({"A=B": "x"})
+
+
+def test_cwd_is_honoured(tmp_path: Path) -> None:
+    (tmp_path / "sub").mkdir()
+    run([SH, "-c", "pwd"], Path("log.pwd"), cwd=tmp_path / "sub")
+    assert (
+        Path((tmp_path / "sub" / "log.pwd").read_text().strip()).resolve()
+        == (tmp_path / "sub").resolve()
+    )
+
+
+def test_missing_program(tmp_path: Path) -> None:
+    with pytest.raises(RunError) as info:
+        run(["fiberform-no-such-program"], Path("log.x"), cwd=tmp_path)
+    assert info.value.returncode is None
+    assert "not found" in str(info.value)
+    with pytest.raises(RunError):
+        run([str(tmp_path / "nothing")], Path("log.x"), cwd=tmp_path)
+
+
+def test_strings_are_not_commands(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError):
+        run("echo hi; touch pwned", Path("log.x"), cwd=tmp_path)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError):
+        run([], Path("log.x"), cwd=tmp_path)
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_no_shell_anywhere_in_the_package() -> None:
+    for src in PACKAGE.rglob("*.py"):
+        text = src.read_text()
+        assert "shell=True" not in text, src
+        assert "os.system(" not in text and "os.popen(" not in text, src
+
+
+def test_ranks_and_oversubscription(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert build_command(["a", "b"], 1) == ["a", "b"]
+    cores = os.cpu_count() or 1
+    with pytest.raises(ConfigError, match="cores"):
+        build_command(["a"], cores + 1)
+    with pytest.raises(ConfigError):
+        build_command(["a"], 0)
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    cmd = build_command(["a"], cores + 1, oversubscribe=True)
+    assert cmd[1:] == ["-np", str(cores + 1), "--oversubscribe", "a"]
+    assert Path(cmd[0]).name == "mpirun"
+    assert "--allow-run-as-root" not in cmd
+    if cores >= 2:
+        assert build_command(["a"], 2)[1:] == ["-np", "2", "a"]
+
+
+@pytest.mark.skipif(
+    shutil.which("mpirun") is None or (os.cpu_count() or 1) < 2, reason="mpirun, 2 cores"
+)
+def test_two_ranks_through_mpirun(tmp_path: Path) -> None:
+    run(["/bin/echo", "hi"], Path("log.mpi"), cwd=tmp_path, ranks=2)
+    assert (tmp_path / "log.mpi").read_text().split() == ["hi", "hi"]
+
+
+def test_progress_callback_sees_every_line(tmp_path: Path) -> None:
+    seen: list[str] = []
+
+    def parser(line: str) -> float | None:
+        seen.append(line)
+        return None
+
+    run(
+        [SH, "-c", "echo a; echo b"],
+        Path("log.p"),
+        cwd=tmp_path,
+        progress=parser,
+        show_progress=True,
+    )
+    assert seen == ["a", "b"]
+
+    def broken(line: str) -> float | None:
+        raise ValueError("bug in a parser")
+
+    run([SH, "-c", "echo a"], Path("log.q"), cwd=tmp_path, progress=broken)
+
+
+def test_timeout_ends_the_run(tmp_path: Path) -> None:
+    start = time.monotonic()
+    with pytest.raises(RunError, match="timed out"):
+        run([SH, "-c", "echo started; sleep 30"], Path("log.t"), cwd=tmp_path, timeout_s=0.5)
+    assert time.monotonic() - start < 10
+
+
+def test_liggghts_progress() -> None:
+    p = liggghts_progress(1000)
+    assert p("     500        2   6.2831853e-08 ") == 0.5
+    assert p("    Step    Atoms         KinEng ") is None
+    assert p("  1 by 1 by 1 MPI processor grid") is None
+    assert p("Created 1 atoms") is None
+    assert p("") is None
+
+
+def test_openfoam_progress() -> None:
+    p = openfoam_progress(0.0, 2.0)
+    assert p("Time = 0.5") == 0.25
+    assert p("ExecutionTime = 1 s") is None
+    assert p("deltaT = 0.1") is None
+
+
+def test_capture() -> None:
+    assert capture([SH, "-c", "echo ok"]) == "ok\n"
+    assert capture([SH, "-c", "exit 1"]) is None
+    assert capture(["fiberform-no-such-program"]) is None
