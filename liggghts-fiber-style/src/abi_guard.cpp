@@ -57,11 +57,16 @@ void check_atom_layout(LAMMPS_NS::LAMMPS *lmp) {
   for (const Probe &p : probes) {
     const void *lib = atom->extract(p.name);
     if (lib != p.header) {
-      const std::string msg = "fiberform ABI guard: LIGGGHTS headers and library disagree on Atom::" +
-                              mismatch(p.name, p.header, lib) +
-                              ". Rebuild against the installed libliggghts-dev; never define "
-                              "SUPERQUADRIC_ACTIVE_FLAG or NONSPHERICAL_ACTIVE_FLAG.";
-      lmp->error->all(FLERR, msg.c_str());
+      // LIGGGHTS' Error::all prints the message again after exit() has run static destructors:
+      // keep it in a plain static buffer, never in a std::string.
+      static char msg[512];
+      std::snprintf(msg, sizeof msg,
+                    "fiberform ABI guard: LIGGGHTS headers and library disagree on Atom::%s "
+                    "(header-derived %p, library %p). Rebuild against the installed "
+                    "libliggghts-dev; never define SUPERQUADRIC_ACTIVE_FLAG or "
+                    "NONSPHERICAL_ACTIVE_FLAG.",
+                    p.name, p.header, lib);
+      lmp->error->all(FLERR, msg);
     }
   }
 }

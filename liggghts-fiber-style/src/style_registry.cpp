@@ -12,6 +12,10 @@
 
 // ---- style headers (one class per style, one file pair per class) ----
 #include "pair_test_harmonic.h"
+#include "pair_fiber_dlvo.h"
+#include "fix_fiber_dlvo_step.h"
+#include "fix_wall_fiber_dlvo.h"
+#include "fix_fiber_beam.h"
 
 namespace fiberform {
 namespace {
@@ -29,6 +33,18 @@ const StyleEntry kStyles[] = {
     {StyleKind::Pair, "test/harmonic",
      "harmonic repulsion F = K*overlap between spheres (test and demo style)",
      &make_pair<LAMMPS_NS::PairTestHarmonic>, nullptr, nullptr},
+    {StyleKind::Pair, "fiber/dlvo",
+     "fiber-fiber extended DLVO + steric contact, sub-integrated per contact (CVODE)",
+     &make_pair<LAMMPS_NS::PairFiberDlvo>, nullptr, nullptr},
+    {StyleKind::Fix, "wall/fiber/dlvo",
+     "the fiber/dlvo law against a plane wall or moving plate (infinite mass)",
+     nullptr, &make_fix<LAMMPS_NS::FixWallFiberDlvo>, nullptr},
+    {StyleKind::Fix, "fiber/dlvo/step",
+     "internal: sub-integration step of pair fiber/dlvo (created automatically)",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberDlvoStep>, nullptr},
+    {StyleKind::Fix, "fiber/beam",
+     "flexible fibers: geometrically exact beam chains (thesis eq. 2.13), integrates its nodes",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberBeam>, nullptr},
 };
 
 const char *kind_name(StyleKind k) {

@@ -280,18 +280,24 @@ class DistributionSpec(_Section):
     kind: Literal["fixed", "uniform", "normal", "lognormal", "data"] = choice(
         "Distribution kind", default="fixed"
     )
-    value: float | None = quantity("Value (kind fixed)", "key unit", default=None)
-    low: float | None = quantity("Lower bound (kind uniform)", "key unit", default=None)
-    high: float | None = quantity("Upper bound (kind uniform)", "key unit", default=None)
-    mean: float | None = quantity("Mean (normal, lognormal)", "key unit", default=None)
+    value: float | None = quantity("Value (kind fixed), in the unit of the enclosing key", "-", default=None)
+    low: float | None = quantity("Lower bound (kind uniform), unit of the key", "-", default=None)
+    high: float | None = quantity("Upper bound (kind uniform), unit of the key", "-", default=None)
+    mean: float | None = quantity("Mean (normal, lognormal), unit of the key", "-", default=None)
     sd: float | None = quantity(
-        "Standard deviation (normal, lognormal)", "key unit", default=None, ge=0.0
+        "Standard deviation (normal, lognormal), unit of the key", "-", default=None, ge=0.0
     )
     column: Identifier | None = Field(
-        default=None, description="CSV column (kind data; default: the key name)"
+        default=None,
+        description="CSV column (kind data; default: the key name)",
+        json_schema_extra={
+            "unit": "-",
+            "meaning": "CSV column (kind data; default: the key name)",
+            "range": f"identifier ^{IDENTIFIER_PATTERN}$",
+        },
     )
-    min: float | None = quantity("Truncate below (resample)", "key unit", default=None)
-    max: float | None = quantity("Truncate above (resample)", "key unit", default=None)
+    min: float | None = quantity("Truncate below (resample), unit of the key", "-", default=None)
+    max: float | None = quantity("Truncate above (resample), unit of the key", "-", default=None)
 
     @model_validator(mode="after")
     def _check(self) -> DistributionSpec:
@@ -315,6 +321,12 @@ class FiberGenerationSection(_Section):
         default=None,
         description="CSV of measured values (header: length_m, width_m, curvature_alpha), "
         "relative to the scene file",
+        json_schema_extra={
+            "unit": "-",
+            "meaning": "CSV of measured values (columns length_m, width_m, curvature_alpha), "
+            "relative to the scene file",
+            "range": "relative path without '..'",
+        },
     )
     length_m: DistributionSpec | None = Field(default=None, description="Fiber length [m]")
     width_m: DistributionSpec | None = Field(default=None, description="Fiber width [m]")
@@ -336,7 +348,7 @@ class FiberGenerationSection(_Section):
         default=1.0, gt=0.0, le=1.0,
     )
     twist_max_rad: float = quantity(
-        "Largest random rotation of t1 about t3 from node to node", "rad",
+        "Largest random rotation of t1 about t3 from node to node, in radians", "1",
         default=0.1, ge=0.0, le=3.2,
     )
     radius_jitter: float = quantity(

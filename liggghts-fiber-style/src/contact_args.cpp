@@ -1,0 +1,148 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Keyword parsing shared by pair_style fiber/dlvo and fix wall/fiber/dlvo (SI units). */
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "contact_engine.h"
+#include "error.h"
+#include "force.h"
+#include "group.h"
+#include "lammps.h"
+
+using namespace LAMMPS_NS;
+
+namespace fiberform {
+
+namespace {
+double number(LAMMPS *lmp, const char *style, const char *kw, int iarg, int narg, char **arg, bool positive) {
+  if (iarg >= narg) {
+    std::string m = std::string(style) + ": keyword '" + kw + "' needs a value";
+    lmp->error->all(FLERR, m.c_str());
+  }
+  char *end = nullptr;
+  const double v = std::strtod(arg[iarg], &end);
+  if (end == arg[iarg] || *end != '\0' || !std::isfinite(v) || (positive && !(v > 0))) {
+    std::string m = std::string(style) + ": keyword '" + kw + "': '" + arg[iarg] + "' is not " +
+                    (positive ? "a finite number > 0" : "a finite number");
+    lmp->error->all(FLERR, m.c_str());
+  }
+  return v;
+}
+bool yesno(LAMMPS *lmp, const char *style, const char *kw, int iarg, int narg, char **arg) {
+  if (iarg < narg && std::strcmp(arg[iarg], "yes") == 0) return true;
+  if (iarg < narg && std::strcmp(arg[iarg], "no") == 0) return false;
+  std::string m = std::string(style) + ": keyword '" + kw + "' expects yes or no";
+  lmp->error->all(FLERR, m.c_str());
+  return false;
+}
+}  // namespace
+
+int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int iarg, int narg, char **arg) {
+  const char *kw = arg[iarg];
+  auto num = [&](int off, bool pos = true) { return number(lmp, style, kw, iarg + off, narg, arg, pos); };
+  physics::ContactLaw &L = c.law;
+  if (!std::strcmp(kw, "integrator")) {
+    if (iarg + 1 >= narg) lmp->error->all(FLERR, "integrator: expected cvode | substep N | none");
+    const char *v = arg[iarg + 1];
+    if (!std::strcmp(v, "cvode")) { c.integrator = IntegratorKind::Cvode; return 2; }
+    if (!std::strcmp(v, "none")) { c.integrator = IntegratorKind::None; return 2; }
+    if (!std::strcmp(v, "substep")) {
+      c.integrator = IntegratorKind::Substep;
+      c.nsub = static_cast<int>(num(2));
+      return 3;
+    }
+    lmp->error->all(FLERR, "integrator: expected cvode | substep N | none");
+  }
+  if (!std::strcmp(kw, "rtol")) { c.rtol = num(1); return 2; }
+  if (!std::strcmp(kw, "atol")) { c.atol = num(1); return 2; }
+  if (!std::strcmp(kw, "terms")) {
+    if (iarg + 1 >= narg) lmp->error->all(FLERR, "terms: expected a comma list of vdw, es, steric");
+    std::string list = arg[iarg + 1];
+    unsigned t = 0;
+    std::size_t pos = 0;
+    while (pos <= list.size()) {
+      const std::size_t e = list.find(',', pos);
+      const std::string w = list.substr(pos, e == std::string::npos ? std::string::npos : e - pos);
+      if (w == "vdw") t |= physics::kVdw;
+      else if (w == "es") t |= physics::kEs;
+      else if (w == "steric") t |= physics::kSteric;
+      else if (w == "none") t |= 0;
+      else lmp->error->all(FLERR, ("terms: unknown term '" + w + "' (vdw, es, steric, none)").c_str());
+      if (e == std::string::npos) break;
+      pos = e + 1;
+    }
+    L.terms = t;
+    return 2;
+  }
+  if (!std::strcmp(kw, "steric_terms")) {
+    if (iarg + 1 >= narg) lmp->error->all(FLERR, "steric_terms: expected a comma list of s1..s4");
+    std::string list = std::string(",") + arg[iarg + 1] + ",";
+    L.steric.s1 = list.find(",s1,") != std::string::npos;
+    L.steric.s2 = list.find(",s2,") != std::string::npos;
+    L.steric.s3 = list.find(",s3,") != std::string::npos;
+    L.steric.s4 = list.find(",s4,") != std::string::npos;
+    return 2;
+  }
+  if (!std::strcmp(kw, "s1_damping")) { L.steric.s1_damping = yesno(lmp, style, kw, iarg + 1, narg, arg); return 2; }
+  if (!std::strcmp(kw, "hamaker")) { L.hamaker = num(1, false); return 2; }
+  if (!std::strcmp(kw, "hamaker_full")) { L.full_hamaker = yesno(lmp, style, kw, iarg + 1, narg, arg); return 2; }
+  if (!std::strcmp(kw, "temperature")) { L.temperature = num(1); return 2; }
+  if (!std::strcmp(kw, "eps_r")) { L.eps_r = num(1); return 2; }
+  if (!std::strcmp(kw, "ionic_strength")) { L.ionic_strength = num(1); return 2; }
+  if (!std::strcmp(kw, "valency")) { L.valency = num(1); return 2; }
+  if (!std::strcmp(kw, "psi")) { L.psi_d = num(1, false); L.use_charge = false; return 2; }
+  if (!std::strcmp(kw, "sigma")) { L.sigma = num(1, false); L.use_charge = true; return 2; }
+  if (!std::strcmp(kw, "h0")) { L.h0 = num(1); return 2; }
+  if (!std::strcmp(kw, "h_cut")) { L.h_cut = num(1); return 2; }
+  if (!std::strcmp(kw, "h_R")) { L.steric.h_R = num(1); return 2; }
+  if (!std::strcmp(kw, "h_S")) { L.steric.h_S = num(1); return 2; }
+  if (!std::strcmp(kw, "t_R")) { L.steric.t_R = num(1); return 2; }
+  if (!std::strcmp(kw, "section")) {
+    if (iarg + 1 < narg && !std::strcmp(arg[iarg + 1], "circle")) { c.section = Section::Circle; return 2; }
+    if (iarg + 1 < narg && !std::strcmp(arg[iarg + 1], "rect")) {
+      c.section = Section::Rect;
+      c.width = num(2);
+      c.thickness = num(3);
+      return 4;
+    }
+    lmp->error->all(FLERR, "section: expected circle | rect W T");
+  }
+  if (!std::strcmp(kw, "up")) {
+    c.up = {num(1, false), num(2, false), num(3, false)};
+    if (physics::norm(c.up) == 0) lmp->error->all(FLERR, "up: the vector must not be zero");
+    c.up = (1.0 / physics::norm(c.up)) * c.up;
+    return 4;
+  }
+  if (!std::strcmp(kw, "points")) {
+    if (iarg + 1 < narg && !std::strcmp(arg[iarg + 1], "auto")) {
+      c.npoints = 0;
+      c.h_match = num(2);
+      return 3;
+    }
+    c.npoints = static_cast<int>(num(1));
+    return 2;
+  }
+  if (!std::strcmp(kw, "self")) { c.self_contact = yesno(lmp, style, kw, iarg + 1, narg, arg); return 2; }
+  if (!std::strcmp(kw, "frozen")) {
+    if (iarg + 1 >= narg) lmp->error->all(FLERR, "frozen: expected a group ID");
+    const int g = lmp->group->find(arg[iarg + 1]);
+    if (g < 0) lmp->error->all(FLERR, (std::string("frozen: unknown group ") + arg[iarg + 1]).c_str());
+    c.frozen_groupbit = lmp->group->bitmask[g];
+    return 2;
+  }
+  return 0;
+}
+
+void validate_contact_config(LAMMPS *lmp, const char *style, EngineConfig &c) {
+  physics::ContactLaw &L = c.law;
+  L.steric.h0 = L.h0;
+  auto fail = [&](const char *m) { lmp->error->all(FLERR, (std::string(style) + ": " + m).c_str()); };
+  if (!(L.steric.h_R > 0 && L.steric.h_R < L.h0)) fail("h_R must satisfy 0 < h_R < h0");
+  if (!(L.h_cut > L.h0)) fail("h_cut must be larger than h0");
+  if (c.section == Section::Rect && !(c.width > 0 && c.thickness > 0)) fail("section rect needs W > 0 and T > 0");
+  if (!(c.rtol > 0 && c.rtol < 1)) fail("rtol must be in (0, 1)");
+  if (c.npoints > 100000) fail("points: at most 100000 per element");
+}
+
+}  // namespace fiberform

@@ -1,0 +1,134 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   The LIGGGHTS-side machinery shared by pair_style fiber/dlvo and fix wall/fiber/dlvo: fibers as
+   chains of atoms, contact points on elements, the closest-point selection (thesis 2.4.3-2.4.4),
+   the per-pair solve and the transfer of the averaged forces to the element nodes (2.4.2).
+
+   Fiber topology (until fix fiber/beam provides more): an atom's molecule ID is its fiber ID; the
+   atom with ID tag+1 and the same molecule ID is the next node. Element = (node, next node),
+   owned by the rank that owns its first node. The mass of a node is shared equally by the
+   elements it belongs to, so the contact points of a fiber carry exactly the fiber's mass:
+   element mass = m_a/deg_a + m_b/deg_b, point mass = element mass / points per element. */
+#ifndef FIBERFORM_CONTACT_ENGINE_H
+#define FIBERFORM_CONTACT_ENGINE_H
+
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "contact_integrator.h"
+#include "physics/contact_law.h"
+#include "pointers.h"
+
+namespace LAMMPS_NS {
+class NeighList;
+}
+
+namespace fiberform {
+
+enum class IntegratorKind { Cvode, Substep, None };
+enum class Section { Circle, Rect };
+
+struct EngineConfig {
+  physics::ContactLaw law;
+  IntegratorKind integrator = IntegratorKind::Cvode;
+  int nsub = 100;
+  double rtol = 1e-6;
+  double atol = 1e-13;  // m, on the contact-induced displacement
+  Section section = Section::Circle;
+  double width = 0, thickness = 0;  // rect cross-section (m)
+  Vec3 up{0, 0, 1};                 // rect: thickness direction reference
+  int npoints = 0;                  // points per element; 0 = auto from h_match
+  double h_match = 1e-9;            // m, gap at which auto points match parallel cylinders
+  bool self_contact = false;        // non-adjacent elements of the same fiber
+  int frozen_groupbit = 0;          // atoms of this group have infinite mass
+};
+
+struct EngineStats {
+  long candidates = 0, in_range = 0, solves = 0, cache_hits = 0, rhs_evals = 0, failures = 0;
+};
+
+// Per-atom arrays the engine reads (local + ghost, index as atom arrays).
+struct NodeData {
+  double **v;      // velocity at t0
+  double **acc;    // intrinsic (non-contact) acceleration at t0 (may be null: zero)
+  double *share;   // node mass share m_i/deg_i (kg)
+};
+// Per-atom arrays the engine adds to (local + ghost).
+struct NodeSinks {
+  double **fpre, **fpost;  // forces (fpost null for the instantaneous mode)
+  double **tpre, **tpost;  // torques (may be null)
+};
+
+struct Plane {
+  Vec3 point, normal, velocity;
+};
+
+// Parses one keyword (and its values) of the contact law / integrator / geometry starting at
+// arg[iarg]; returns the number of words consumed, 0 if the keyword is not one of ours. Errors name
+// the keyword. `style` is used in messages.
+int parse_contact_keyword(LAMMPS_NS::LAMMPS *lmp, const char *style, EngineConfig &cfg, int iarg, int narg,
+                          char **arg);
+// Checks the combination of parameters (after all keywords); calls error->all on nonsense.
+void validate_contact_config(LAMMPS_NS::LAMMPS *lmp, const char *style, EngineConfig &cfg);
+
+class ContactEngine : protected LAMMPS_NS::Pointers {
+ public:
+  explicit ContactEngine(LAMMPS_NS::LAMMPS *lmp);
+  EngineConfig cfg;
+  EngineStats stats;
+
+  void init();  // integrator set-up; checks atom style
+  // Next node of atom i (local or ghost; closest image), or -1 at a chain end.
+  int next_node(int i) const;
+  int prev_node(int i) const;
+  // m_i/deg_i for the local atoms into share[0..nlocal).
+  void compute_shares(double *share) const;
+  // Largest element length over all ranks (m) and largest atom radius.
+  void global_extents(double &max_len, double &max_rad) const;
+  // Reach between first nodes of two interacting elements (for cut-offs).
+  double reach(double max_len, double max_rad) const;
+
+  // Fiber-fiber: loops over local elements with the full neighbour list. dt: fiber time step;
+  // subintegrate false = instantaneous forces into sinks.fpre.
+  void pairs(LAMMPS_NS::NeighList *list, double dt, bool subintegrate, const NodeData &nd,
+             const NodeSinks &out);
+  // Fiber-plane for local elements of atoms in groupbit.
+  void wall(const Plane &pl, int groupbit, double dt, bool subintegrate, const NodeData &nd,
+            const NodeSinks &out);
+
+ private:
+  struct Element {
+    int a, b;             // node indices (local/ghost)
+    int tag, mol;
+    Vec3 xa, xb, axis;    // axis unit vector
+    double len, radius, rep_radius;  // rep_radius: law radius (rect: min side / 2)
+    double inv_mpt;       // 1 / point mass (0 = frozen)
+    int n;                // contact points
+    Vec3 e_t;             // rect thickness direction
+    double vmax, amax;    // node speed / acceleration bounds (for the range test)
+  };
+  bool make_element(int i, const NodeData &nd, Element &e) const;
+  PointState point_state(const Element &e, int k, const NodeData &nd) const;
+  void apply(const Element &e, int k, Vec3 r_off, Vec3 fpre, Vec3 fpost, const NodeSinks &out, bool post);
+  int npoints_for(double len, double r) const;
+
+  ContactIntegrator integrator_;
+  struct Key {
+    std::uint64_t a, b;
+    bool operator==(const Key &o) const { return a == o.a && b == o.b; }
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key &k) const { return std::hash<std::uint64_t>()(k.a * 1000003u ^ k.b); }
+  };
+  std::unordered_map<Key, PairResult, KeyHash> cache_;
+  struct Candidate {
+    int k, mol, elem, q;
+    double dist;
+  };
+  std::vector<Candidate> cand_;
+  std::vector<Element> partners_;
+};
+
+}  // namespace fiberform
+
+#endif

@@ -1,0 +1,239 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+#include "fiber_contact_fix.h"
+
+#include <mpi.h>
+
+#include <cstring>
+
+#include "abi_guard.h"
+#include "atom.h"
+#include "comm.h"
+#include "error.h"
+#include "fix.h"
+#include "force.h"
+#include "memory.h"
+#include "update.h"
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+
+FiberContactFix::FiberContactFix(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
+  comm_forward = 7;   // v(3), a0(3), mass share(1)
+  comm_reverse = 12;  // fpre, fpost, tpre, tpost
+  vector_flag = 1;
+  size_vector = 5;
+  global_freq = 1;
+  extvector = 0;
+  nevery = 1;
+  grow_arrays(atom->nmax);
+  atom->add_callback(0);
+  for (int i = 0; i < atom->nmax; ++i)
+    for (int k = 0; k < 3; ++k) cpost_[i][k] = tpost_[i][k] = 0.0;
+}
+
+FiberContactFix::~FiberContactFix() {
+  atom->delete_callback(id, 0);
+  memory->destroy(cpost_);
+  memory->destroy(tpost_);
+  memory->destroy(vbuf_);
+  memory->destroy(acc_);
+  memory->destroy(share_);
+  memory->destroy(fpre_);
+  memory->destroy(fpost_);
+  memory->destroy(tpre_);
+  memory->destroy(tpost_b_);
+}
+
+int FiberContactFix::setmask() { return PRE_FORCE | POST_FORCE | END_OF_STEP; }
+
+void FiberContactFix::init() {
+  fiberform::check_atom_layout(lmp);
+  if (!engine_) error->all(FLERR, "fiber contact fix without an engine");
+  engine_->init();
+  reach_ = interaction_reach();
+}
+
+double FiberContactFix::extend_cut_ghost() {
+  // platform.md: ghosts are effectively shipped only within about half of the requested
+  // distance for finite-radius atoms; request twice the reach.
+  return 2.0 * reach_;
+}
+
+void FiberContactFix::grow_buffers() {
+  const int nall = atom->nlocal + atom->nghost;
+  if (nall <= nbuf_) return;
+  nbuf_ = atom->nmax > nall ? atom->nmax : nall;
+  memory->grow(vbuf_, nbuf_, 3, "fiber_contact:v");
+  memory->grow(acc_, nbuf_, 3, "fiber_contact:acc");
+  memory->grow(share_, nbuf_, "fiber_contact:share");
+  memory->grow(fpre_, nbuf_, 3, "fiber_contact:fpre");
+  memory->grow(fpost_, nbuf_, 3, "fiber_contact:fpost");
+  memory->grow(tpre_, nbuf_, 3, "fiber_contact:tpre");
+  memory->grow(tpost_b_, nbuf_, 3, "fiber_contact:tpost");
+}
+
+void FiberContactFix::prepare(bool with_acc) {
+  grow_buffers();
+  const int nlocal = atom->nlocal;
+  double **v = atom->v, **f = atom->f;
+  double *rmass = atom->rmass;
+  engine_->compute_shares(share_);
+  for (int i = 0; i < nlocal; ++i)
+    for (int k = 0; k < 3; ++k) {
+      vbuf_[i][k] = v[i][k];
+      acc_[i][k] = with_acc ? (f[i][k] - cpost_[i][k]) / rmass[i] : 0.0;
+    }
+  comm->forward_comm_fix(this);
+}
+
+void FiberContactFix::solve_step() {
+  prepare(true);
+  const int nall = atom->nlocal + atom->nghost;
+  for (int i = 0; i < nall; ++i)
+    for (int k = 0; k < 3; ++k) fpre_[i][k] = fpost_[i][k] = tpre_[i][k] = tpost_b_[i][k] = 0.0;
+  const bool torques = atom->torque_flag;
+  accumulate(true, {vbuf_, acc_, share_}, {fpre_, fpost_, torques ? tpre_ : nullptr, torques ? tpost_b_ : nullptr});
+  comm->reverse_comm_fix(this);
+  double **f = atom->f;
+  double **t = atom->torque;
+  for (int i = 0; i < atom->nlocal; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      f[i][k] += fpre_[i][k] - cpost_[i][k];  // replace last step's post part by the new pre part
+      cpost_[i][k] = 2.0 * fpost_[i][k] - fpre_[i][k];
+      if (torques) {
+        t[i][k] += tpre_[i][k] - tpost_[i][k];
+        tpost_[i][k] = tpre_[i][k];  // torques: no velocity correction (nodes carry no ODE spin)
+      }
+    }
+  }
+}
+
+void FiberContactFix::setup_pre_force(int vflag) { pre_force(vflag); }
+
+void FiberContactFix::pre_force(int) {
+  // integrator none: the force phase needs ghost mass shares and velocities
+  if (!subintegrating()) prepare(false);
+}
+
+void FiberContactFix::setup(int vflag) {
+  if (!subintegrating()) {
+    post_force(vflag);
+    return;
+  }
+  // f holds every force but ours (our post part is not applied in setup)
+  for (int i = 0; i < atom->nlocal; ++i)
+    for (int k = 0; k < 3; ++k) cpost_[i][k] = tpost_[i][k] = 0.0;
+  solve_step();
+}
+
+void FiberContactFix::end_of_step() {
+  if (subintegrating()) solve_step();
+}
+
+void FiberContactFix::post_force(int) {
+  double **f = atom->f;
+  if (subintegrating()) {
+    double **t = atom->torque;
+    for (int i = 0; i < atom->nlocal; ++i)
+      for (int k = 0; k < 3; ++k) {
+        f[i][k] += cpost_[i][k];
+        if (atom->torque_flag) t[i][k] += tpost_[i][k];
+      }
+    return;
+  }
+  if (!fix_applies_instantaneous()) return;
+  const int nall = atom->nlocal + atom->nghost;
+  grow_buffers();
+  for (int i = 0; i < nall; ++i)
+    for (int k = 0; k < 3; ++k) fpre_[i][k] = fpost_[i][k] = tpre_[i][k] = tpost_b_[i][k] = 0.0;
+  const bool torques = atom->torque_flag;
+  accumulate(false, {vbuf_, nullptr, share_}, {fpre_, nullptr, torques ? tpre_ : nullptr, nullptr});
+  comm->reverse_comm_fix(this);
+  double **t = atom->torque;
+  for (int i = 0; i < atom->nlocal; ++i)
+    for (int k = 0; k < 3; ++k) {
+      f[i][k] += fpre_[i][k];
+      if (torques) t[i][k] += tpre_[i][k];
+    }
+}
+
+double FiberContactFix::compute_vector(int n) {
+  const fiberform::EngineStats &s = engine_->stats;
+  double loc = 0.0, glob = 0.0;
+  switch (n) {
+    case 0: loc = s.solves; break;
+    case 1: loc = s.in_range; break;
+    case 2: loc = s.rhs_evals; break;
+    case 3: loc = s.failures; break;
+    case 4: loc = s.cache_hits; break;
+  }
+  MPI_Allreduce(&loc, &glob, 1, MPI_DOUBLE, MPI_SUM, world);
+  return glob;
+}
+
+// ---- per-atom persistent state (the post part must follow its atom across ranks)
+void FiberContactFix::grow_arrays(int nmax) {
+  memory->grow(cpost_, nmax, 3, "fiber_contact:cpost");
+  memory->grow(tpost_, nmax, 3, "fiber_contact:tpost");
+}
+void FiberContactFix::copy_arrays(int i, int j, int) {
+  for (int k = 0; k < 3; ++k) {
+    cpost_[j][k] = cpost_[i][k];
+    tpost_[j][k] = tpost_[i][k];
+  }
+}
+int FiberContactFix::pack_exchange(int i, double *buf) {
+  for (int k = 0; k < 3; ++k) {
+    buf[k] = cpost_[i][k];
+    buf[3 + k] = tpost_[i][k];
+  }
+  return 6;
+}
+int FiberContactFix::unpack_exchange(int n, double *buf) {
+  for (int k = 0; k < 3; ++k) {
+    cpost_[n][k] = buf[k];
+    tpost_[n][k] = buf[3 + k];
+  }
+  return 6;
+}
+
+// ---- ghost communication
+int FiberContactFix::pack_comm(int n, int *list, double *buf, int, int *) {
+  int m = 0;
+  for (int q = 0; q < n; ++q) {
+    const int j = list[q];
+    for (int k = 0; k < 3; ++k) buf[m++] = vbuf_[j][k];
+    for (int k = 0; k < 3; ++k) buf[m++] = acc_[j][k];
+    buf[m++] = share_[j];
+  }
+  return comm_forward;
+}
+void FiberContactFix::unpack_comm(int n, int first, double *buf) {
+  grow_buffers();
+  int m = 0;
+  for (int i = first; i < first + n; ++i) {
+    for (int k = 0; k < 3; ++k) vbuf_[i][k] = buf[m++];
+    for (int k = 0; k < 3; ++k) acc_[i][k] = buf[m++];
+    share_[i] = buf[m++];
+  }
+}
+int FiberContactFix::pack_reverse_comm(int n, int first, double *buf) {
+  int m = 0;
+  for (int i = first; i < first + n; ++i) {
+    for (int k = 0; k < 3; ++k) buf[m++] = fpre_[i][k];
+    for (int k = 0; k < 3; ++k) buf[m++] = fpost_[i][k];
+    for (int k = 0; k < 3; ++k) buf[m++] = tpre_[i][k];
+    for (int k = 0; k < 3; ++k) buf[m++] = tpost_b_[i][k];
+  }
+  return comm_reverse;
+}
+void FiberContactFix::unpack_reverse_comm(int n, int *list, double *buf) {
+  int m = 0;
+  for (int q = 0; q < n; ++q) {
+    const int j = list[q];
+    for (int k = 0; k < 3; ++k) fpre_[j][k] += buf[m++];
+    for (int k = 0; k < 3; ++k) fpost_[j][k] += buf[m++];
+    for (int k = 0; k < 3; ++k) tpre_[j][k] += buf[m++];
+    for (int k = 0; k < 3; ++k) tpost_b_[j][k] += buf[m++];
+  }
+}

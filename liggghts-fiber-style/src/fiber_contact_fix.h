@@ -1,0 +1,74 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Base of the fixes that apply sub-integrated fiber contact forces (the internal fix of
+   pair_style fiber/dlvo and fix wall/fiber/dlvo). Not a style by itself.
+
+   Why a fix: with velocity Verlet a pair style only ever sees x(t+dt) and the half-step velocity
+   v(t+dt/2); the sub-integration of eq. 2.19-2.21 needs the state at the START of a fiber step
+   (x, full-step v, and the other forces, i.e. the intrinsic acceleration a0). That state exists
+   at end_of_step() of the previous step (and in setup()). There:
+     1. a0 = (f - C_post)/m per node: every force except this fix's own contribution;
+     2. each interacting pair of contact points is integrated over [t, t+dt] (CVODE or sub-steps);
+     3. F_pos (eq. 2.22, beta = 1/2) is added to f now: the next initial_integrate (velocity
+        Verlet: x += dt v + dt^2/2 f/m) then lands the points exactly on the ODE end positions;
+     4. C_post = 2 F_vel - F_pos is stored per atom (migrates with the atom) and added in
+        post_force() of the next step, so that the final half kick lands on the ODE end velocity:
+        v(t+dt) = v + dt/2 (a0 + F_pos/m) + dt/2 (a0' + C_post/m) = v + dt F_vel/m + dt/2 (a0 + a0').
+   With integrator none the engine instead adds the instantaneous force in the force phase. */
+#ifndef FIBERFORM_FIBER_CONTACT_FIX_H
+#define FIBERFORM_FIBER_CONTACT_FIX_H
+
+#include "contact_engine.h"
+#include "fix.h"
+
+namespace LAMMPS_NS {
+
+class FiberContactFix : public Fix {
+ public:
+  FiberContactFix(class LAMMPS *lmp, int narg, char **arg);
+  ~FiberContactFix() override;
+  int setmask() override;
+  void init() override;
+  void setup_pre_force(int) override;
+  void setup(int) override;
+  void pre_force(int) override;
+  void post_force(int) override;
+  void end_of_step() override;
+  double extend_cut_ghost() override;
+
+  void grow_arrays(int) override;
+  void copy_arrays(int, int, int) override;
+  int pack_exchange(int, double *) override;
+  int unpack_exchange(int, double *) override;
+  int pack_comm(int, int *, double *, int, int *) override;
+  void unpack_comm(int, int, double *) override;
+  int pack_reverse_comm(int, int, double *) override;
+  void unpack_reverse_comm(int, int *, double *) override;
+  double compute_vector(int) override;
+  // Node data for the force phase (integrator none): velocities and mass shares, local + ghost.
+  fiberform::NodeData node_data() const { return {vbuf_, nullptr, share_}; }
+
+ protected:
+  // The engine whose configuration applies; set by the derived class before init().
+  fiberform::ContactEngine *engine_ = nullptr;
+  // Adds contact forces of local elements into the sinks (local + ghost indices).
+  virtual void accumulate(bool subintegrate, const fiberform::NodeData &nd, const fiberform::NodeSinks &out) = 0;
+  // Distance from a local atom to the farthest atom it may interact with through an element.
+  virtual double interaction_reach() = 0;
+  // integrator none: is the instantaneous force added by the fix (wall) or by a pair (false)?
+  virtual bool fix_applies_instantaneous() const { return true; }
+  bool subintegrating() const { return engine_->cfg.integrator != fiberform::IntegratorKind::None; }
+
+ private:
+  void prepare(bool with_acc);   // shares, velocities, a0 of locals, forward comm to ghosts
+  void solve_step();             // steps 1-4 above
+  void grow_buffers();
+  double **cpost_ = nullptr, **tpost_ = nullptr;  // per-atom, persistent (nmax)
+  double **vbuf_ = nullptr, **acc_ = nullptr, *share_ = nullptr;  // nall
+  double **fpre_ = nullptr, **fpost_ = nullptr, **tpre_ = nullptr, **tpost_b_ = nullptr;  // nall
+  int nbuf_ = 0;
+  double reach_ = 0.0;
+};
+
+}  // namespace LAMMPS_NS
+
+#endif

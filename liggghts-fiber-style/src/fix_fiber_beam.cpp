@@ -1,0 +1,817 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fix fiber/beam: see fix_fiber_beam.h, docs/styles/fix_fiber_beam.md and docs/models/beam.md. */
+#include "fix_fiber_beam.h"
+
+#include <mpi.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <vector>
+
+#include "abi_guard.h"
+#include "atom.h"
+#include "comm.h"
+#include "domain.h"
+#include "error.h"
+#include "force.h"
+#include "group.h"
+#include "memory.h"
+#include "modify.h"
+#include "physics/beam.h"
+#include "update.h"
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+
+char FixFiberBeam::errmsg_[1024];
+
+const char *FixFiberBeam::errtext(const std::string &s) {
+  std::snprintf(errmsg_, sizeof errmsg_, "%s", s.c_str());
+  return errmsg_;
+}
+namespace bm = fiberform::physics::beam;
+
+namespace {
+
+constexpr int kRecordCols = 19;  // id fiber node count a1 a2 b1 b2 x0 y0 z0 q0(4) q(4)
+constexpr int kDynamicComm = 10;  // q(4) v(3) omega(3)
+
+bm::Vec3 vec(const double *p) { return {p[0], p[1], p[2]}; }
+bm::Quat quat(const double *p) { return {p[0], p[1], p[2], p[3]}; }
+void put(double *p, bm::Vec3 v) { p[0] = v.x; p[1] = v.y; p[2] = v.z; }
+void add(double *p, bm::Vec3 v) { p[0] += v.x; p[1] += v.y; p[2] += v.z; }
+
+void say(LAMMPS *lmp, const std::string &s) {
+  if (lmp->comm->me != 0) return;
+  if (lmp->screen) std::fputs(s.c_str(), lmp->screen);
+  if (lmp->logfile) std::fputs(s.c_str(), lmp->logfile);
+}
+
+}  // namespace
+
+/* ---------------------------------------------------------------------- */
+
+FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
+  if (narg < 3) error->all(FLERR, "fix fiber/beam: missing arguments");
+  time_integrate = 1;
+  restart_global = 1;
+  restart_peratom = 1;
+  // per-atom output f_ID[1..7]: fiber ID, node index, node count, qw, qx, qy, qz
+  peratom_flag = 1;
+  size_peratom_cols = 7;
+  peratom_freq = 1;
+  scalar_flag = 1;
+  extscalar = 1;
+  vector_flag = 1;
+  size_vector = 13;
+  extvector = 0;
+  global_freq = 1;
+  comm_forward = NSTATIC > kDynamicComm ? NSTATIC : kDynamicComm;
+
+  bool haveE = false, haveG = false, haveRho = false;
+  auto need = [&](int iarg, int n, const char *kw) {
+    if (iarg + n >= narg) {
+      const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' needs " + std::to_string(n) +
+                            " value(s)";
+      error->all(FLERR, errtext(m));
+    }
+  };
+  auto positive = [&](double v, const char *kw, bool allow_zero) {
+    if (!std::isfinite(v) || v < 0 || (!allow_zero && v == 0)) {
+      const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' must be a finite number " +
+                            (allow_zero ? ">= 0" : "> 0");
+      error->all(FLERR, errtext(m));
+    }
+    return v;
+  };
+  for (int iarg = 3; iarg < narg;) {
+    const char *kw = arg[iarg];
+    if (std::strcmp(kw, "nodes") == 0) {
+      need(iarg, 1, kw);
+      nodes_path_ = arg[iarg + 1];
+      iarg += 2;
+    } else if (std::strcmp(kw, "E") == 0) {
+      need(iarg, 1, kw);
+      E_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      haveE = true;
+      iarg += 2;
+    } else if (std::strcmp(kw, "G") == 0) {
+      need(iarg, 1, kw);
+      G_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      haveG = true;
+      iarg += 2;
+    } else if (std::strcmp(kw, "density") == 0) {
+      need(iarg, 1, kw);
+      rho_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      haveRho = true;
+      iarg += 2;
+    } else if (std::strcmp(kw, "shear_factor") == 0) {
+      need(iarg, 1, kw);
+      kshear_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      iarg += 2;
+    } else if (std::strcmp(kw, "damping") == 0) {
+      need(iarg, 1, kw);
+      t_damp_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, true);
+      iarg += 2;
+    } else if (std::strcmp(kw, "drag") == 0) {
+      need(iarg, 1, kw);
+      tau_drag_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, true);
+      iarg += 2;
+    } else if (std::strcmp(kw, "stiffness_scale") == 0) {
+      need(iarg, 1, kw);
+      stiff_scale_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      iarg += 2;
+    } else if (std::strcmp(kw, "inertia_scale") == 0) {
+      need(iarg, 1, kw);
+      inertia_scale_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      iarg += 2;
+    } else if (std::strcmp(kw, "torque") == 0) {
+      need(iarg, 4, kw);
+      const int ig = group->find(arg[iarg + 1]);
+      if (ig < 0) error->all(FLERR, "fix fiber/beam: keyword 'torque': unknown group");
+      torque_groupbit_ = group->bitmask[ig];
+      for (int k = 0; k < 3; ++k) torque_[k] = force->numeric(FLERR, arg[iarg + 2 + k]);
+      iarg += 5;
+    } else if (std::strcmp(kw, "dt_check") == 0) {
+      need(iarg, 1, kw);
+      if (std::strcmp(arg[iarg + 1], "error") == 0) dt_check_error_ = true;
+      else if (std::strcmp(arg[iarg + 1], "warn") == 0) dt_check_error_ = false;
+      else error->all(FLERR, "fix fiber/beam: keyword 'dt_check' takes 'error' or 'warn'");
+      iarg += 2;
+    } else {
+      const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
+                            "' (expected nodes, E, G, density, shear_factor, damping, drag, "
+                            "stiffness_scale, inertia_scale, torque, dt_check)";
+      error->all(FLERR, errtext(m));
+    }
+  }
+  if (!haveE || !haveG || !haveRho)
+    error->all(FLERR, "fix fiber/beam: keywords E (Pa), G (Pa) and density (kg/m3) are required");
+  if (!atom->radius_flag || !atom->rmass_flag || !atom->omega_flag || !atom->torque_flag)
+    error->all(FLERR, "fix fiber/beam requires atom_style sphere (radius, rmass, omega, torque)");
+  if (atom->map_style == 0)
+    error->all(FLERR, "fix fiber/beam requires 'atom_modify map array' (nodes are found by atom ID)");
+
+  grow_arrays(atom->nmax);
+  atom->add_callback(0);
+  atom->add_callback(1);
+  for (int i = 0; i < atom->nmax; ++i) set_arrays(i);
+
+  if (!nodes_path_.empty()) read_nodes_file(nodes_path_.c_str());
+}
+
+FixFiberBeam::~FixFiberBeam() {
+  atom->delete_callback(id, 0);
+  atom->delete_callback(id, 1);
+  memory->destroy(node_);
+  memory->destroy(acc_);
+}
+
+int FixFiberBeam::setmask() {
+  return INITIAL_INTEGRATE | PRE_NEIGHBOR | PRE_FORCE | POST_FORCE | FINAL_INTEGRATE;
+}
+
+FixFiberBeam *FixFiberBeam::find(LAMMPS *lmp) {
+  for (int i = 0; i < lmp->modify->nfix; ++i)
+    if (std::strcmp(lmp->modify->fix[i]->style, "fiber/beam") == 0)
+      return dynamic_cast<FixFiberBeam *>(lmp->modify->fix[i]);
+  return nullptr;
+}
+
+void FixFiberBeam::frame(int i, double t1[3], double t2[3], double t3[3]) const {
+  const bm::Quat q = quat(&node_[i][QW]);
+  put(t1, bm::qrot(q, {1, 0, 0}));
+  put(t2, bm::qrot(q, {0, 1, 0}));
+  put(t3, bm::qrot(q, {0, 0, 1}));
+}
+
+void FixFiberBeam::section_radii(int i, double r[4]) const {
+  for (int k = 0; k < 4; ++k) r[k] = node_[i][A1 + k];
+}
+
+/* ---------------------------------------------------------------------- 
+   nodes file: one line per node,
+     atom-ID fiber-ID node-index node-count a1 a2 b1 b2 x0 y0 z0 q0w q0x q0y q0z [qw qx qy qz]
+   '#' starts a comment. Read on rank 0, broadcast, assigned to the owned atoms by ID.
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::read_nodes_file(const char *path) {
+  std::vector<double> rec;
+  int status = 0;
+  std::string why;
+  if (comm->me == 0) {
+    std::ifstream in(path);
+    if (!in) {
+      status = 1;
+      why = std::string("cannot open nodes file ") + path;
+    }
+    std::string line;
+    int lineno = 0;
+    std::map<long, size_t> row_of_tag;
+    while (status == 0 && std::getline(in, line)) {
+      ++lineno;
+      const auto hash = line.find('#');
+      if (hash != std::string::npos) line.erase(hash);
+      std::istringstream ss(line);
+      std::vector<double> vals;
+      double v;
+      while (ss >> v) vals.push_back(v);
+      if (!ss.eof()) {
+        status = 1;
+        why = "nodes file line " + std::to_string(lineno) + ": not a number";
+        break;
+      }
+      if (vals.empty()) continue;
+      if (vals.size() != 15 && vals.size() != 19) {
+        status = 1;
+        why = "nodes file line " + std::to_string(lineno) + ": expected 15 or 19 values, got " +
+              std::to_string(vals.size());
+        break;
+      }
+      if (vals.size() == 15) vals.insert(vals.end(), vals.begin() + 11, vals.begin() + 15);
+      bool ok = vals[0] >= 1 && vals[1] >= 0 && vals[2] >= 0 && vals[3] >= 2 && vals[2] < vals[3] &&
+                bm::section_valid(vals[4], vals[5], vals[6], vals[7]);
+      for (double x : vals) ok = ok && std::isfinite(x);
+      if (!ok) {
+        status = 1;
+        why = "nodes file line " + std::to_string(lineno) +
+              ": need atom-ID >= 1, fiber-ID >= 0, 0 <= node-index < node-count, node-count >= 2, "
+              "0 <= b < a for the section radii, finite values";
+        break;
+      }
+      row_of_tag[static_cast<long>(vals[0])] = rec.size() / kRecordCols;
+      rec.insert(rec.end(), vals.begin(), vals.end());
+    }
+    // topology check and the longest element (ghost reach)
+    const size_t nrow = rec.size() / kRecordCols;
+    for (size_t r = 0; status == 0 && r < nrow; ++r) {
+      const double *a = &rec[r * kRecordCols];
+      if (a[2] + 1 >= a[3]) continue;
+      const auto it = row_of_tag.find(static_cast<long>(a[0]) + 1);
+      const double *b = it == row_of_tag.end() ? nullptr : &rec[it->second * kRecordCols];
+      if (!b || b[1] != a[1] || b[2] != a[2] + 1 || b[3] != a[3]) {
+        status = 1;
+        why = "nodes file: node after atom " + std::to_string(static_cast<long>(a[0])) +
+              " must be atom ID+1 with the same fiber ID, node index+1 and node count";
+        break;
+      }
+      double d[3] = {b[8] - a[8], b[9] - a[9], b[10] - a[10]};
+      domain->minimum_image(d);
+      max_elem_len_ = std::fmax(max_elem_len_, std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]));
+    }
+  }
+  MPI_Bcast(&status, 1, MPI_INT, 0, world);
+  if (status) {
+    const std::string m = "fix fiber/beam: " + why;
+    error->one(FLERR, errtext(m));
+  }
+  long n = static_cast<long>(rec.size());
+  MPI_Bcast(&n, 1, MPI_LONG, 0, world);
+  rec.resize(n);
+  MPI_Bcast(rec.data(), static_cast<int>(n), MPI_DOUBLE, 0, world);
+  MPI_Bcast(&max_elem_len_, 1, MPI_DOUBLE, 0, world);
+
+  const int nrow = static_cast<int>(n / kRecordCols);
+  int assigned = 0;
+  for (int r = 0; r < nrow; ++r) {
+    const double *a = &rec[static_cast<size_t>(r) * kRecordCols];
+    const long tag = static_cast<long>(a[0]);
+    if (tag > atom->map_tag_max) continue;
+    const int i = atom->map(static_cast<int>(tag));
+    if (i < 0 || i >= atom->nlocal) continue;
+    double *p = node_[i];
+    p[FID] = a[1];
+    p[IDX] = a[2];
+    p[CNT] = a[3];
+    for (int k = 0; k < 4; ++k) p[A1 + k] = a[4 + k];
+    for (int k = 0; k < 3; ++k) p[X0 + k] = a[8 + k];
+    const bm::Quat q0 = bm::qnormalize(quat(a + 11)), q = bm::qnormalize(quat(a + 15));
+    p[Q0W] = q0.w; p[Q0X] = q0.x; p[Q0Y] = q0.y; p[Q0Z] = q0.z;
+    p[QW] = q.w; p[QX] = q.x; p[QY] = q.y; p[QZ] = q.z;
+    p[HASREF] = 0;
+    ++assigned;
+  }
+  int total = 0;
+  MPI_Allreduce(&assigned, &total, 1, MPI_INT, MPI_SUM, world);
+  if (total != nrow) {
+    const std::string m = "fix fiber/beam: nodes file lists " + std::to_string(nrow) + " nodes but only " +
+                          std::to_string(total) + " of those atom IDs exist";
+    error->all(FLERR, errtext(m));
+  }
+  ref_done_ = 0;
+}
+
+/* ---------------------------------------------------------------------- */
+
+void FixFiberBeam::init() {
+  fiberform::check_atom_layout(lmp);
+  dtv_ = update->dt;
+  dtf_ = 0.5 * update->dt * force->ftm2v;
+  // nobody else may integrate our nodes
+  for (int f = 0; f < modify->nfix; ++f) {
+    Fix *other = modify->fix[f];
+    if (other == this || !other->time_integrate) continue;
+    int overlap = 0, any = 0;
+    for (int i = 0; i < atom->nlocal; ++i)
+      if ((atom->mask[i] & groupbit) && (atom->mask[i] & other->groupbit)) overlap = 1;
+    MPI_Allreduce(&overlap, &any, 1, MPI_INT, MPI_MAX, world);
+    if (any) {
+      const std::string m = std::string("fix fiber/beam integrates its nodes itself; fix ") + other->id +
+                            " (" + other->style + ") also integrates some of them. Apply it to a group "
+                            "without fiber nodes.";
+      error->all(FLERR, errtext(m));
+    }
+  }
+}
+
+double FixFiberBeam::extend_cut_ghost() {
+  // ghosts must reach one element; LIGGGHTS effectively halves this request (platform.md)
+  return 2.0 * 1.05 * max_elem_len_;
+}
+
+void FixFiberBeam::reset_dt() {
+  dtv_ = update->dt;
+  dtf_ = 0.5 * update->dt * force->ftm2v;
+}
+
+/* ----------------------------------------------------------------------
+   element section: radii averaged over the two nodes
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::element_section(int i, int j, double *area, double inertia[3], double stiff[6]) const {
+  const double a1 = 0.5 * (node_[i][A1] + node_[j][A1]), a2 = 0.5 * (node_[i][A2] + node_[j][A2]);
+  const double b1 = 0.5 * (node_[i][B1] + node_[j][B1]), b2 = 0.5 * (node_[i][B2] + node_[j][B2]);
+  const bm::Section s = bm::hollow_ellipse(a1, a2, b1, b2);
+  const bm::Stiffness C = bm::section_stiffness(s, E_, G_, kshear_, stiff_scale_);
+  *area = s.A;
+  inertia[0] = s.I1;
+  inertia[1] = s.I2;
+  inertia[2] = s.Ip;
+  stiff[0] = C.CG.x; stiff[1] = C.CG.y; stiff[2] = C.CG.z;
+  stiff[3] = C.CK.x; stiff[4] = C.CK.y; stiff[5] = C.CK.z;
+}
+
+static int neighbour_node(LAMMPS *lmp, int i, int dtag) {
+  const long t = static_cast<long>(lmp->atom->tag[i]) + dtag;
+  if (t < 1 || t > lmp->atom->map_tag_max) return -1;
+  const int j = lmp->atom->map(static_cast<int>(t));
+  if (j < 0) return -1;
+  return lmp->domain->closest_image(i, j);
+}
+
+static void missing_neighbour(LAMMPS *lmp, int i, int dtag) {
+  static char buf[512];  // static POD: LIGGGHTS' Error prints the message again at exit
+  std::snprintf(buf, sizeof buf,
+                "fix fiber/beam: node %d needs atom %d, which is neither owned nor a ghost "
+                "on this rank. The ghost cut-off must cover one element (check the nodes file and the "
+                "atom IDs, or raise it with 'communicate single cutoff')",
+                lmp->atom->tag[i], lmp->atom->tag[i] + dtag);
+  lmp->error->one(FLERR, buf);
+}
+
+/* ---------------------------------------------------------------------- 
+   stress-free reference (from the nodes file's x0, q0), node mass and rotary inertia
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::compute_reference() {
+  const int nlocal = atom->nlocal;
+  int bad = 0;
+  for (int i = 0; i < nlocal; ++i) {
+    if (!(atom->mask[i] & groupbit)) continue;
+    if (!is_node(i)) {
+      ++bad;
+      continue;
+    }
+    double *p = node_[i];
+    double mass = 0, inert[3] = {0, 0, 0};
+    for (int side = 0; side < 2; ++side) {
+      const int dtag = side == 0 ? -1 : +1;
+      if (side == 0 && p[IDX] < 0.5) continue;
+      if (side == 1 && p[IDX] + 1 >= p[CNT]) continue;
+      const int j = neighbour_node(lmp, i, dtag);
+      if (j < 0) missing_neighbour(lmp, i, dtag);
+      const int a = side == 0 ? j : i, b = side == 0 ? i : j;
+      double d0[3] = {node_[b][X0] - node_[a][X0], node_[b][Y0] - node_[a][Y0], node_[b][Z0] - node_[a][Z0]};
+      domain->minimum_image(d0);
+      const double len0 = std::sqrt(d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]);
+      if (!(len0 > 0)) error->one(FLERR, "fix fiber/beam: two consecutive nodes share the same reference position");
+      double area, I[3], C[6];
+      element_section(a, b, &area, I, C);
+      mass += 0.5 * rho_ * area * len0;
+      for (int k = 0; k < 3; ++k) inert[k] += 0.5 * inertia_scale_ * rho_ * I[k] * len0;
+      if (side == 1) {
+        const bm::Vec3 xa = vec(&node_[a][X0]);
+        const bm::ElementRef r =
+            bm::element_reference(xa, quat(&node_[a][Q0W]), xa + vec(d0), quat(&node_[b][Q0W]));
+        p[HASREF] = 1;
+        p[L0] = r.L0;
+        put(&p[G0X], r.gamma0);
+        put(&p[K0X], r.kappa0);
+        for (int k = 0; k < 6; ++k) p[CGX + k] = C[k];
+      }
+    }
+    atom->rmass[i] = mass;
+    p[JB1] = inert[0];
+    p[JB2] = inert[1];
+    p[JB3] = inert[2];
+  }
+  int badall = 0;
+  MPI_Allreduce(&bad, &badall, 1, MPI_INT, MPI_SUM, world);
+  if (badall) {
+    const std::string m = "fix fiber/beam: " + std::to_string(badall) +
+                          " atoms of the fix group have no entry in the nodes file";
+    error->all(FLERR, errtext(m));
+  }
+  ref_done_ = 1;
+}
+
+void FixFiberBeam::compute_critical_steps(bool print) {
+  double dt[4] = {INFINITY, INFINITY, INFINITY, INFINITY};
+  bigint counts[2] = {0, 0}, all[2];
+  for (int i = 0; i < atom->nlocal; ++i) {
+    if (!(atom->mask[i] & groupbit) || !is_node(i)) continue;
+    ++counts[0];
+    if (node_[i][IDX] < 0.5) ++counts[1];
+    if (node_[i][HASREF] < 0.5) continue;
+    const int j = neighbour_node(lmp, i, +1);
+    if (j < 0) missing_neighbour(lmp, i, +1);
+    const double a1 = 0.5 * (node_[i][A1] + node_[j][A1]), a2 = 0.5 * (node_[i][A2] + node_[j][A2]);
+    const double b1 = 0.5 * (node_[i][B1] + node_[j][B1]), b2 = 0.5 * (node_[i][B2] + node_[j][B2]);
+    const bm::Section s = bm::hollow_ellipse(a1, a2, b1, b2);
+    const bm::Stiffness C{vec(&node_[i][CGX]), vec(&node_[i][CKX])};
+    const bm::CriticalSteps c = bm::critical_steps(s, C, node_[i][L0], rho_, inertia_scale_, t_damp_);
+    dt[0] = std::fmin(dt[0], c.axial);
+    dt[1] = std::fmin(dt[1], c.shear);
+    dt[2] = std::fmin(dt[2], c.bending);
+    dt[3] = std::fmin(dt[3], c.torsion);
+  }
+  double dtall[4];
+  MPI_Allreduce(dt, dtall, 4, MPI_DOUBLE, MPI_MIN, world);
+  MPI_Allreduce(counts, all, 2, MPI_LMP_BIGINT, MPI_SUM, world);
+  nnodes_ = all[0];
+  nfibers_ = all[1];
+  double mn = INFINITY;
+  const char *names[4] = {"axial", "shear", "bending", "torsion"};
+  int which = 0;
+  for (int k = 0; k < 4; ++k) {
+    dt_crit_[k] = dtall[k];
+    if (dtall[k] < mn) {
+      mn = dtall[k];
+      which = k;
+    }
+  }
+  dt_crit_[4] = mn;
+  if (print) {
+    char buf[1024];
+    std::snprintf(buf, sizeof buf,
+                  "fix fiber/beam: %ld fibers, %ld nodes; E %g Pa, G %g Pa, density %g kg/m3, shear_factor %g\n"
+                  "  options: stiffness_scale %g, inertia_scale %g, damping %g s, drag %g s\n"
+                  "  critical time step (velocity Verlet, element bound): axial %.4g s, shear %.4g s, "
+                  "bending %.4g s, torsion %.4g s\n"
+                  "  timestep %.4g s = %.3f x critical (%s)\n",
+                  static_cast<long>(nfibers_), static_cast<long>(nnodes_), E_, G_, rho_, kshear_, stiff_scale_,
+                  inertia_scale_, t_damp_, tau_drag_, dtall[0], dtall[1], dtall[2], dtall[3], update->dt,
+                  update->dt / mn, names[which]);
+    say(lmp, buf);
+  }
+  if (update->dt > mn) {
+    char buf[512];
+    std::snprintf(buf, sizeof buf,
+                  "fix fiber/beam: timestep %.4g s exceeds the critical step %.4g s of the %s mode. "
+                  "Reduce the timestep, or trade accuracy for speed with stiffness_scale (axial/shear) or "
+                  "inertia_scale (rotary inertia), see docs/styles/fix_fiber_beam.md",
+                  update->dt, mn, names[which]);
+    if (dt_check_error_) error->all(FLERR, errtext(buf));
+    else error->warning(FLERR, errtext(buf));
+  }
+}
+
+/* ---------------------------------------------------------------------- */
+
+void FixFiberBeam::setup_pre_neighbor() { pre_neighbor(); }
+
+void FixFiberBeam::pre_neighbor() {
+  comm_mode_ = 1;
+  comm->forward_comm_fix(this);
+  comm_mode_ = 0;
+}
+
+void FixFiberBeam::setup_pre_force(int vflag) { pre_force(vflag); }
+
+void FixFiberBeam::pre_force(int) {
+  comm_mode_ = 0;
+  comm->forward_comm_fix(this);
+}
+
+void FixFiberBeam::setup(int vflag) {
+  if (!ref_done_) {
+    pre_neighbor();
+    compute_reference();
+  }
+  pre_neighbor();  // ship the element data to the ghosts
+  pre_force(vflag);
+  compute_critical_steps(true);
+  post_force(vflag);
+}
+
+/* ---------------------------------------------------------------------- */
+
+void FixFiberBeam::post_force(int) {
+  const int nlocal = atom->nlocal;
+  if (nmax_acc_ < atom->nmax) {
+    nmax_acc_ = atom->nmax;
+    memory->destroy(acc_);
+    memory->create(acc_, nmax_acc_, 12, "fiber/beam:acc");
+  }
+  double **x = atom->x, **v = atom->v, **omega = atom->omega;
+  double **f = atom->f, **torque = atom->torque;
+  int *mask = atom->mask;
+  energy_local_ = 0;
+  dissipation_local_ = 0;
+  for (int i = 0; i < nlocal; ++i)
+    for (int k = 0; k < 12; ++k) acc_[i][k] = 0.0;
+
+  auto state = [&](int i) {
+    bm::NodeState s;
+    s.x = vec(x[i]);
+    s.q = quat(&node_[i][QW]);
+    s.v = vec(v[i]);
+    s.w = vec(omega[i]);
+    return s;
+  };
+  auto element = [&](int a, int b) {
+    const double *p = node_[a];
+    bm::ElementRef r;
+    r.L0 = p[L0];
+    r.gamma0 = vec(&p[G0X]);
+    r.kappa0 = vec(&p[K0X]);
+    const bm::Stiffness C{vec(&p[CGX]), vec(&p[CKX])};
+    return bm::element_forces(state(a), state(b), r, C, t_damp_);
+  };
+
+  for (int i = 0; i < nlocal; ++i) {
+    if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    // element to the next node: computed once per rank that owns at least one end
+    if (node_[i][IDX] + 1 < node_[i][CNT]) {
+      const int j = neighbour_node(lmp, i, +1);
+      if (j < 0) missing_neighbour(lmp, i, +1);
+      if (node_[i][HASREF] < 0.5) error->one(FLERR, "fix fiber/beam: element without reference");
+      const bm::ElementForces e = element(i, j);
+      add(&acc_[i][6], e.fA);
+      add(&acc_[i][9], e.tA);
+      if (j < nlocal) {
+        add(&acc_[j][0], e.fB);
+        add(&acc_[j][3], e.tB);
+        energy_local_ += e.energy;
+        dissipation_local_ += e.dissipation;
+      } else {
+        energy_local_ += 0.5 * e.energy;
+        dissipation_local_ += 0.5 * e.dissipation;
+      }
+    }
+    // element from a previous node that is a ghost here
+    if (node_[i][IDX] > 0.5) {
+      const int j = neighbour_node(lmp, i, -1);
+      if (j < 0) missing_neighbour(lmp, i, -1);
+      if (j >= nlocal) {
+        if (node_[j][HASREF] < 0.5) error->one(FLERR, "fix fiber/beam: ghost element without reference");
+        const bm::ElementForces e = element(j, i);
+        add(&acc_[i][0], e.fB);
+        add(&acc_[i][3], e.tB);
+        energy_local_ += 0.5 * e.energy;
+        dissipation_local_ += 0.5 * e.dissipation;
+      }
+    }
+  }
+  // sum in a fixed order (previous element, then next) so results do not depend on the
+  // decomposition; then background drag and the external torque
+  for (int i = 0; i < nlocal; ++i) {
+    if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    for (int k = 0; k < 3; ++k) {
+      f[i][k] += acc_[i][k] + acc_[i][6 + k];
+      torque[i][k] += acc_[i][3 + k] + acc_[i][9 + k];
+    }
+    if (tau_drag_ > 0) {
+      const double c = 1.0 / tau_drag_;
+      for (int k = 0; k < 3; ++k) f[i][k] -= c * atom->rmass[i] * v[i][k];
+      const bm::Quat q = quat(&node_[i][QW]);
+      const bm::Vec3 wb = bm::qrot_t(q, vec(omega[i]));
+      const bm::Vec3 tb{-c * node_[i][JB1] * wb.x, -c * node_[i][JB2] * wb.y, -c * node_[i][JB3] * wb.z};
+      add(torque[i], bm::qrot(q, tb));
+    }
+    if (torque_groupbit_ && (mask[i] & torque_groupbit_))
+      for (int k = 0; k < 3; ++k) torque[i][k] += torque_[k];
+  }
+}
+
+/* ----------------------------------------------------------------------
+   velocity Verlet; rotation: body-frame angular momentum, half kick with the torque, free-rotor
+   splitting (physics/beam.h free_rotation), half kick
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::initial_integrate(int) {
+  double **x = atom->x, **v = atom->v, **f = atom->f, **omega = atom->omega, **torque = atom->torque;
+  double *rmass = atom->rmass;
+  int *mask = atom->mask;
+  for (int i = 0; i < atom->nlocal; ++i) {
+    if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    const double dtfm = dtf_ / rmass[i];
+    for (int k = 0; k < 3; ++k) {
+      v[i][k] += dtfm * f[i][k];
+      x[i][k] += dtv_ * v[i][k];
+    }
+    double *p = node_[i];
+    bm::Quat q = quat(&p[QW]);
+    const bm::Vec3 J{p[JB1], p[JB2], p[JB3]};
+    bm::Vec3 Lb = bm::hadamard(J, bm::qrot_t(q, vec(omega[i]))) + dtf_ * bm::qrot_t(q, vec(torque[i]));
+    bm::free_rotation(dtv_, J, q, Lb);
+    p[QW] = q.w; p[QX] = q.x; p[QY] = q.y; p[QZ] = q.z;
+    put(omega[i], bm::qrot(q, {Lb.x / J.x, Lb.y / J.y, Lb.z / J.z}));
+  }
+}
+
+void FixFiberBeam::final_integrate() {
+  double **v = atom->v, **f = atom->f, **omega = atom->omega, **torque = atom->torque;
+  double *rmass = atom->rmass;
+  int *mask = atom->mask;
+  for (int i = 0; i < atom->nlocal; ++i) {
+    if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    const double dtfm = dtf_ / rmass[i];
+    for (int k = 0; k < 3; ++k) v[i][k] += dtfm * f[i][k];
+    const double *p = node_[i];
+    const bm::Quat q = quat(&p[QW]);
+    const bm::Vec3 J{p[JB1], p[JB2], p[JB3]};
+    const bm::Vec3 Lb = bm::hadamard(J, bm::qrot_t(q, vec(omega[i]))) + dtf_ * bm::qrot_t(q, vec(torque[i]));
+    put(omega[i], bm::qrot(q, {Lb.x / J.x, Lb.y / J.y, Lb.z / J.z}));
+  }
+}
+
+/* ----------------------------------------------------------------------
+   global output: scalar = elastic energy (J). vector (1-based in f_ID[n]):
+   1 elastic energy, 2 translational kinetic energy, 3 rotational kinetic energy (with the node
+   inertia of this fix), 4 total, 5 damping power (W), 6 critical step (min), 7-10 critical steps
+   axial, shear, bending, torsion, 11 stiffness_scale, 12 inertia_scale, 13 damping time
+------------------------------------------------------------------------- */
+
+double FixFiberBeam::compute_scalar() {
+  double all = 0;
+  MPI_Allreduce(&energy_local_, &all, 1, MPI_DOUBLE, MPI_SUM, world);
+  return all;
+}
+
+double FixFiberBeam::compute_vector(int n) {
+  if (n == 0) return compute_scalar();
+  if (n == 1 || n == 2 || n == 3) {
+    double ke[3] = {0, 0, 0}, all[3];
+    ke[0] = energy_local_;
+    for (int i = 0; i < atom->nlocal; ++i) {
+      if (!(atom->mask[i] & groupbit) || !is_node(i)) continue;
+      const double *vi = atom->v[i];
+      ke[1] += 0.5 * atom->rmass[i] * (vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]);
+      const bm::Vec3 wb = bm::qrot_t(quat(&node_[i][QW]), vec(atom->omega[i]));
+      ke[2] += 0.5 * (node_[i][JB1] * wb.x * wb.x + node_[i][JB2] * wb.y * wb.y + node_[i][JB3] * wb.z * wb.z);
+    }
+    MPI_Allreduce(ke, all, 3, MPI_DOUBLE, MPI_SUM, world);
+    if (n == 3) return all[0] + all[1] + all[2];
+    return all[n];
+  }
+  if (n == 4) {
+    double all = 0;
+    MPI_Allreduce(&dissipation_local_, &all, 1, MPI_DOUBLE, MPI_SUM, world);
+    return all;
+  }
+  if (n == 5) return dt_crit_[4];
+  if (n >= 6 && n <= 9) return dt_crit_[n - 6];
+  if (n == 10) return stiff_scale_;
+  if (n == 11) return inertia_scale_;
+  if (n == 12) return t_damp_;
+  return 0.0;
+}
+
+int FixFiberBeam::modify_param(int narg, char **arg) {
+  if (narg >= 2 && std::strcmp(arg[0], "damping") == 0) {
+    t_damp_ = force->numeric(FLERR, arg[1]);
+    if (!(t_damp_ >= 0)) error->all(FLERR, "fix_modify fiber/beam damping: must be >= 0");
+    return 2;
+  }
+  if (narg >= 2 && std::strcmp(arg[0], "drag") == 0) {
+    tau_drag_ = force->numeric(FLERR, arg[1]);
+    if (!(tau_drag_ >= 0)) error->all(FLERR, "fix_modify fiber/beam drag: must be >= 0");
+    return 2;
+  }
+  if (narg >= 2 && std::strcmp(arg[0], "torque") == 0) {
+    if (narg < 5) error->all(FLERR, "fix_modify fiber/beam torque: expected group Tx Ty Tz");
+    const int ig = group->find(arg[1]);
+    if (ig < 0) error->all(FLERR, "fix_modify fiber/beam torque: unknown group");
+    torque_groupbit_ = group->bitmask[ig];
+    for (int k = 0; k < 3; ++k) torque_[k] = force->numeric(FLERR, arg[2 + k]);
+    return 5;
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------------- 
+   per-atom state that moves with atoms
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::grow_arrays(int nmax) {
+  memory->grow(node_, nmax, NCOL, "fiber/beam:node");
+  array_atom = node_;
+}
+
+void FixFiberBeam::copy_arrays(int i, int j, int) {
+  for (int k = 0; k < NCOL; ++k) node_[j][k] = node_[i][k];
+}
+
+void FixFiberBeam::set_arrays(int i) {
+  for (int k = 0; k < NCOL; ++k) node_[i][k] = 0.0;
+  node_[i][FID] = -1.0;
+  node_[i][QW] = node_[i][Q0W] = 1.0;
+  node_[i][JB1] = node_[i][JB2] = node_[i][JB3] = 1.0;
+}
+
+int FixFiberBeam::pack_exchange(int i, double *buf) {
+  for (int k = 0; k < NCOL; ++k) buf[k] = node_[i][k];
+  return NCOL;
+}
+
+int FixFiberBeam::unpack_exchange(int nlocal, double *buf) {
+  for (int k = 0; k < NCOL; ++k) node_[nlocal][k] = buf[k];
+  return NCOL;
+}
+
+int FixFiberBeam::pack_restart(int i, double *buf) {
+  buf[0] = NCOL + 1;
+  for (int k = 0; k < NCOL; ++k) buf[k + 1] = node_[i][k];
+  return NCOL + 1;
+}
+
+void FixFiberBeam::unpack_restart(int nlocal, int nth) {
+  double **extra = atom->extra;
+  int m = 0;
+  for (int k = 0; k < nth; ++k) m += static_cast<int>(extra[nlocal][m]);
+  ++m;
+  for (int k = 0; k < NCOL; ++k) node_[nlocal][k] = extra[nlocal][m++];
+}
+
+int FixFiberBeam::size_restart(int) { return NCOL + 1; }
+int FixFiberBeam::maxsize_restart() { return NCOL + 1; }
+
+void FixFiberBeam::write_restart(FILE *fp) {
+  double list[2] = {static_cast<double>(ref_done_), max_elem_len_};
+  if (comm->me == 0) {
+    const int size = sizeof(list);
+    std::fwrite(&size, sizeof(int), 1, fp);
+    std::fwrite(list, sizeof(double), 2, fp);
+  }
+}
+
+void FixFiberBeam::restart(char *buf) {
+  const double *list = reinterpret_cast<double *>(buf);
+  ref_done_ = static_cast<int>(list[0]);
+  max_elem_len_ = std::fmax(max_elem_len_, list[1]);
+}
+
+int FixFiberBeam::pack_comm(int n, int *list, double *buf, int, int *) {
+  int m = 0;
+  if (comm_mode_ == 1) {
+    for (int ii = 0; ii < n; ++ii) {
+      const int j = list[ii];
+      for (int k = 0; k < NSTATIC; ++k) buf[m++] = node_[j][k];
+    }
+  } else {
+    double **v = atom->v, **omega = atom->omega;
+    for (int ii = 0; ii < n; ++ii) {
+      const int j = list[ii];
+      for (int k = 0; k < 4; ++k) buf[m++] = node_[j][QW + k];
+      for (int k = 0; k < 3; ++k) buf[m++] = v[j][k];
+      for (int k = 0; k < 3; ++k) buf[m++] = omega[j][k];
+    }
+  }
+  // LIGGGHTS 3.8 (LAMMPS 2013 convention): pack_comm returns the number of values PER ATOM
+  return comm_mode_ == 1 ? static_cast<int>(NSTATIC) : kDynamicComm;
+}
+
+void FixFiberBeam::unpack_comm(int n, int first, double *buf) {
+  int m = 0;
+  const int last = first + n;
+  if (comm_mode_ == 1) {
+    for (int i = first; i < last; ++i)
+      for (int k = 0; k < NSTATIC; ++k) node_[i][k] = buf[m++];
+  } else {
+    double **v = atom->v, **omega = atom->omega;
+    for (int i = first; i < last; ++i) {
+      for (int k = 0; k < 4; ++k) node_[i][QW + k] = buf[m++];
+      for (int k = 0; k < 3; ++k) v[i][k] = buf[m++];
+      for (int k = 0; k < 3; ++k) omega[i][k] = buf[m++];
+    }
+  }
+}
+
+double FixFiberBeam::memory_usage() {
+  return static_cast<double>(atom->nmax) * NCOL * sizeof(double) + static_cast<double>(nmax_acc_) * 12 * sizeof(double);
+}

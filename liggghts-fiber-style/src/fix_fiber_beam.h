@@ -1,0 +1,124 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fix fiber/beam: flexible fibers as chains of nodes joined by geometrically exact
+   (Simo-Reissner) beam elements, thesis eq. 2.9-2.13, sections as in thesis sec. 3.4.
+
+   Syntax (full page: docs/styles/fix_fiber_beam.md):
+     fix ID group fiber/beam nodes FILE E <Pa> G <Pa> density <kg/m3> [keyword value ...]
+       shear_factor k          Timoshenko shear correction (default 5/6)
+       damping t_d             Kelvin-Voigt material damping time, s (default 0 = off)
+       drag tau                mass-proportional background damping time, s (default 0 = off)
+       stiffness_scale s       multiplies EA, GA1, GA2 (default 1)
+       inertia_scale s         multiplies the nodes' rotary inertia (default 1)
+       torque group Tx Ty Tz   constant external torque (N m, space frame) on the nodes of group
+       dt_check error|warn     what to do when the timestep exceeds the critical step (default error)
+
+   The fix integrates the fiber nodes itself (velocity Verlet for positions, symplectic splitting
+   for the anisotropic rotation); do not apply fix nve/sphere to them.
+
+   Public accessors (for contact styles, e.g. pair fiber/dlvo): valid for owned atoms and, after
+   the fix's forward communication in pre_force, for ghost atoms. */
+#ifndef LMP_FIX_FIBER_BEAM_H
+#define LMP_FIX_FIBER_BEAM_H
+
+#include <string>
+
+#include "fix.h"
+
+namespace LAMMPS_NS {
+
+class FixFiberBeam : public Fix {
+ public:
+  FixFiberBeam(class LAMMPS *lmp, int narg, char **arg);
+  ~FixFiberBeam() override;
+  int setmask() override;
+  void init() override;
+  void setup_pre_neighbor() override;
+  void setup_pre_force(int vflag) override;
+  void setup(int vflag) override;
+  void pre_neighbor() override;
+  void pre_force(int vflag) override;
+  void initial_integrate(int vflag) override;
+  void post_force(int vflag) override;
+  void final_integrate() override;
+  void reset_dt() override;
+  double extend_cut_ghost() override;
+  double compute_scalar() override;
+  double compute_vector(int n) override;
+  int modify_param(int narg, char **arg) override;
+
+  void grow_arrays(int nmax) override;
+  void copy_arrays(int i, int j, int delflag) override;
+  void set_arrays(int i) override;
+  int pack_exchange(int i, double *buf) override;
+  int unpack_exchange(int nlocal, double *buf) override;
+  int pack_restart(int i, double *buf) override;
+  void unpack_restart(int nlocal, int nth) override;
+  int size_restart(int i) override;
+  int maxsize_restart() override;
+  int pack_comm(int n, int *list, double *buf, int pbc_flag, int *pbc) override;
+  void unpack_comm(int n, int first, double *buf) override;
+  void write_restart(FILE *fp) override;
+  void restart(char *buf) override;
+  double memory_usage() override;
+
+  // ---- public accessors (atom index i: owned or ghost) ----
+  bool is_node(int i) const { return node_[i][FID] >= 0.0; }
+  int fiber_id(int i) const { return static_cast<int>(node_[i][FID]); }
+  int node_index(int i) const { return static_cast<int>(node_[i][IDX]); }
+  int node_count(int i) const { return static_cast<int>(node_[i][CNT]); }
+  // unit quaternion (w, x, y, z) of the cross-section frame: t_I = R(q) e_I
+  const double *quaternion(int i) const { return &node_[i][QW]; }
+  // the frame vectors t1, t2 (principal axes of the section), t3 (tangent)
+  void frame(int i, double t1[3], double t2[3], double t3[3]) const;
+  // outer and inner semi-axes a1, a2, b1, b2 of the node's section, m
+  void section_radii(int i, double r[4]) const;
+  // the first fix fiber/beam defined in this LAMMPS instance, or nullptr
+  static FixFiberBeam *find(class LAMMPS *lmp);
+
+  // column layout of the per-atom array (all doubles)
+  enum Col {
+    FID = 0, IDX, CNT,              // fiber ID (-1: not a fiber node), node index, node count
+    QW, QX, QY, QZ,                 // current frame
+    A1, A2, B1, B2,                 // section radii at the node
+    X0, Y0, Z0, Q0W, Q0X, Q0Y, Q0Z, // stress-free reference position and frame
+    HASREF,                         // 1 when the element to the next node is set up
+    L0, G0X, G0Y, G0Z, K0X, K0Y, K0Z, // element to next node: length, Gamma0, kappa0
+    CGX, CGY, CGZ, CKX, CKY, CKZ,   // element stiffness GA1 GA2 EA EI1 EI2 GJ
+    NSTATIC,                        // columns below are not sent to ghosts
+    JB1 = NSTATIC, JB2, JB3,        // rotary inertia of the node about t1, t2, t3, kg m^2
+    NCOL
+  };
+
+ private:
+  void read_nodes_file(const char *path);
+  void compute_reference();
+  void compute_critical_steps(bool print);
+  void element_section(int i, int j, double *area, double inertia[3], double stiff[6]) const;
+
+  double **node_ = nullptr;    // per-atom state, NCOL columns
+  double **acc_ = nullptr;     // scratch: per-local-atom force/torque from prev (0-5), next (6-11)
+  int nmax_acc_ = 0;
+
+  double E_ = 0, G_ = 0, rho_ = 0, kshear_ = 5.0 / 6.0;
+  double t_damp_ = 0, tau_drag_ = 0, stiff_scale_ = 1, inertia_scale_ = 1;
+  int torque_groupbit_ = 0;
+  double torque_[3] = {0, 0, 0};
+  bool dt_check_error_ = true;
+  std::string nodes_path_;
+  // Error text handed to LIGGGHTS' Error, which prints it again after exit() has run static
+  // destructors: plain static char storage (no destructor) keeps it valid.
+  static char errmsg_[1024];
+  static const char *errtext(const std::string &s);
+
+  int ref_done_ = 0;
+  int comm_mode_ = 0;  // 0: dynamic (q, v, omega), 1: static (columns 0..NSTATIC-1)
+  double max_elem_len_ = 0;
+  double dtv_ = 0, dtf_ = 0;
+  double energy_local_ = 0, dissipation_local_ = 0;
+  double dt_crit_[5] = {0, 0, 0, 0, 0};  // axial, shear, bending, torsion, min
+  bigint nfibers_ = 0, nnodes_ = 0;
+};
+
+}  // namespace LAMMPS_NS
+
+#endif

@@ -1,0 +1,349 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Geometrically exact (Simo-Reissner / Cosserat) rod element: pure functions, SI units.
+
+   Used by fix fiber/beam (fix_fiber_beam.cpp); unit-tested in tests/test_beam.cpp.
+   The formulation is documented in docs/models/beam.md. Summary:
+
+   * A fiber is a chain of nodes; node k carries a position x_k and a unit quaternion q_k whose
+     rotation matrix R_k maps the body basis (e1, e2, e3) to the cross-section frame
+     (t1, t2, t3) (thesis eq. 2.7, Lambda = R). t3 is the fiber tangent, t1/t2 principal axes.
+   * Element A-B (reference length L0). Relative rotation vector theta = log(q_A^* q_B)
+     (R_A^T R_B = exp(theta^)); mid-element rotation R_m = R_A exp(theta^/2) (geodesic midpoint).
+     Strains (thesis eq. 2.10, one-point quadrature):
+         Gamma = R_m^T (x_B - x_A) / L0 - e3 - Gamma0      (shear 1, shear 2, axial)
+         kappa = theta / L0 - kappa0                       (bending 1, bending 2, twist)
+     Gamma0, kappa0 are the strains of the stress-free (generated, possibly curved) reference.
+   * Stored energy (thesis eq. 2.13), C = diag(GA1, GA2, EA, EI1, EI2, GJ):
+         U = L0/2 * (Gamma . C_G Gamma + kappa . C_K kappa)
+   * Nodal forces and torques are the EXACT negative variations of U (with spatial virtual
+     rotations delta R = alpha^ R), using the left Jacobian J_l of SO(3):
+         n = R_m C_G Gamma,  F_A = +n,  F_B = -n
+         m = R_A J_l(theta)^-T C_K kappa              (bending/torsion couple)
+         u = d x n,  P u = 1/2 R_A J_l(theta)^-T J_l(theta/2)^T R_A^T u
+         T_A = u - P u + m,  T_B = P u - m
+     so the discrete system is conservative (energy test) and objective (no force under rigid
+     rotation). Small-rotation limit: T_A = T_B = d x n / 2 +- m (the familiar linear element).
+   * Optional Kelvin-Voigt material damping (stiffness proportional, time constant t_d):
+     N_d = t_d C_G dGamma/dt, M_d = t_d C_K dkappa/dt with the objective strain rates
+     dGamma/dt = R_m^T (v_B - v_A - w_m x d) / L0, dkappa/dt = R_m^T (w_B - w_A) / L0, w_m = mean.
+     It dissipates only deformation; rigid motion is undamped.
+
+   Sources: J.C. Simo, L. Vu-Quoc, Comput. Methods Appl. Mech. Eng. 58 (1986) 79-116 and 66 (1988)
+   125-161 (finite-strain rod); T.D. Barfoot, State Estimation for Robotics (2017) ch. 7 (SO(3)
+   Jacobians); A. Dullweber, B. Leimkuhler, R. McLachlan, J. Chem. Phys. 107 (1997) 5840 (symplectic
+   splitting for rigid-body rotation); T. Belytschko, W.K. Liu, B. Moran, Nonlinear Finite Elements
+   (2000) sec. 6.3 (element eigenvalue bound for the critical time step). */
+#ifndef FIBERFORM_PHYSICS_BEAM_H
+#define FIBERFORM_PHYSICS_BEAM_H
+
+#include <algorithm>
+#include <cmath>
+
+namespace fiberform::physics::beam {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// ------------------------------------------------------------------------------------------
+// small vector / quaternion algebra
+// ------------------------------------------------------------------------------------------
+struct Vec3 {
+  double x = 0, y = 0, z = 0;
+  double &operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
+  double operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+};
+inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+inline Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline Vec3 operator*(double s, Vec3 a) { return {s * a.x, s * a.y, s * a.z}; }
+inline double dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Vec3 cross(Vec3 a, Vec3 b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double norm(Vec3 a) { return std::sqrt(dot(a, a)); }
+inline Vec3 hadamard(Vec3 a, Vec3 b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
+
+struct Quat {
+  double w = 1, x = 0, y = 0, z = 0;
+};
+inline Quat qmul(Quat a, Quat b) {
+  return {a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z, a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y,
+          a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x, a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w};
+}
+inline Quat qconj(Quat a) { return {a.w, -a.x, -a.y, -a.z}; }
+inline Quat qnormalize(Quat a) {
+  const double n = std::sqrt(a.w * a.w + a.x * a.x + a.y * a.y + a.z * a.z);
+  return {a.w / n, a.x / n, a.y / n, a.z / n};
+}
+// rotate a body vector into space: R(q) v
+inline Vec3 qrot(Quat q, Vec3 v) {
+  const Vec3 u{q.x, q.y, q.z};
+  const Vec3 t = 2.0 * cross(u, v);
+  return v + q.w * t + cross(u, t);
+}
+// space -> body: R(q)^T v
+inline Vec3 qrot_t(Quat q, Vec3 v) { return qrot(qconj(q), v); }
+
+// exp: rotation vector -> unit quaternion
+inline Quat qexp(Vec3 th) {
+  const double a = norm(th);
+  const double h = 0.5 * a;
+  // sin(h)/a with a series below 1e-4 (error < 1e-18)
+  const double s = a < 1e-4 ? 0.5 - a * a / 48.0 : std::sin(h) / a;
+  return {std::cos(h), s * th.x, s * th.y, s * th.z};
+}
+// log: unit quaternion -> rotation vector of angle in [0, pi] (shortest rotation)
+inline Vec3 qlog(Quat q) {
+  if (q.w < 0) q = {-q.w, -q.x, -q.y, -q.z};
+  const Vec3 v{q.x, q.y, q.z};
+  const double s = norm(v);
+  if (s < 1e-8) {
+    // angle = 2 atan2(s, w) ~ 2 s / w (1 - s^2/(3 w^2))
+    const double f = 2.0 / q.w * (1.0 - s * s / (3.0 * q.w * q.w));
+    return f * v;
+  }
+  const double ang = 2.0 * std::atan2(s, q.w);
+  return (ang / s) * v;
+}
+// unit quaternion from the columns of a rotation matrix given as three orthonormal vectors
+inline Quat quat_from_frame(Vec3 t1, Vec3 t2, Vec3 t3) {
+  const double m00 = t1.x, m10 = t1.y, m20 = t1.z;
+  const double m01 = t2.x, m11 = t2.y, m21 = t2.z;
+  const double m02 = t3.x, m12 = t3.y, m22 = t3.z;
+  const double tr = m00 + m11 + m22;
+  Quat q;
+  if (tr > 0) {
+    const double s = 2.0 * std::sqrt(tr + 1.0);
+    q = {0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s};
+  } else if (m00 > m11 && m00 > m22) {
+    const double s = 2.0 * std::sqrt(1.0 + m00 - m11 - m22);
+    q = {(m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s};
+  } else if (m11 > m22) {
+    const double s = 2.0 * std::sqrt(1.0 + m11 - m00 - m22);
+    q = {(m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s};
+  } else {
+    const double s = 2.0 * std::sqrt(1.0 + m22 - m00 - m11);
+    q = {(m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s};
+  }
+  return qnormalize(q);
+}
+
+// SO(3) left Jacobian J_l(th) v and the products with its inverse / transposes.
+// J_l = I + a th^ + b th^2, a = (1 - cos f)/f^2, b = (f - sin f)/f^3, f = |th|.
+// J_l^-1 = I - th^/2 + c th^2, c = (1 - f sin f / (2 (1 - cos f))) / f^2.
+struct JacobianCoeffs {
+  double a, b, c;
+};
+inline JacobianCoeffs jacobian_coeffs(double f) {
+  if (f < 1e-3) {
+    const double f2 = f * f;
+    return {0.5 - f2 / 24.0, 1.0 / 6.0 - f2 / 120.0, 1.0 / 12.0 + f2 / 720.0};
+  }
+  const double f2 = f * f;
+  return {(1.0 - std::cos(f)) / f2, (f - std::sin(f)) / (f2 * f),
+          (1.0 - f * std::sin(f) / (2.0 * (1.0 - std::cos(f)))) / f2};
+}
+// M v for M = I + s1 th^ + s2 th^2 (th^ v = th x v)
+inline Vec3 apply_so3(Vec3 th, double s1, double s2, Vec3 v) {
+  const Vec3 tv = cross(th, v);
+  return v + s1 * tv + s2 * cross(th, tv);
+}
+// transposes flip the sign of the odd term
+inline Vec3 jl(Vec3 th, Vec3 v) { const auto k = jacobian_coeffs(norm(th)); return apply_so3(th, k.a, k.b, v); }
+inline Vec3 jl_t(Vec3 th, Vec3 v) { const auto k = jacobian_coeffs(norm(th)); return apply_so3(th, -k.a, k.b, v); }
+inline Vec3 jl_inv(Vec3 th, Vec3 v) { const auto k = jacobian_coeffs(norm(th)); return apply_so3(th, -0.5, k.c, v); }
+inline Vec3 jl_inv_t(Vec3 th, Vec3 v) { const auto k = jacobian_coeffs(norm(th)); return apply_so3(th, 0.5, k.c, v); }
+
+// ------------------------------------------------------------------------------------------
+// cross-section (thesis sec. 3.4): hollow ellipse, outer semi-axes a1 (along t1), a2 (along t2),
+// inner semi-axes b1, b2 (b = 0: solid). Circular: a1 = a2 = w; collapsed: a1 = 0.8 w, a2 = 0.2 w.
+// ------------------------------------------------------------------------------------------
+struct Section {
+  double A;   // area, m^2
+  double I1;  // second moment about the t1 axis (bending that moves the fiber along t2), m^4
+  double I2;  // second moment about the t2 axis, m^4
+  double J;   // St-Venant torsion constant, m^4
+  double Ip;  // polar second moment I1 + I2 (torsional rotary inertia per density), m^4
+};
+// J of a solid ellipse: pi a^3 b^3 / (a^2 + b^2) (exact). Hollow: J_outer - J_inner, which is
+// exact for similar ellipses (b1/a1 = b2/a2, including the hollow circle) and an approximation
+// otherwise (documented in docs/models/beam.md).
+inline double ellipse_torsion(double a, double b) {
+  if (a <= 0 || b <= 0) return 0.0;
+  return kPi * a * a * a * b * b * b / (a * a + b * b);
+}
+inline Section hollow_ellipse(double a1, double a2, double b1, double b2) {
+  Section s{};
+  s.A = kPi * (a1 * a2 - b1 * b2);
+  s.I1 = 0.25 * kPi * (a1 * a2 * a2 * a2 - b1 * b2 * b2 * b2);
+  s.I2 = 0.25 * kPi * (a1 * a1 * a1 * a2 - b1 * b1 * b1 * b2);
+  s.J = ellipse_torsion(a1, a2) - ellipse_torsion(b1, b2);
+  s.Ip = s.I1 + s.I2;
+  return s;
+}
+inline bool section_valid(double a1, double a2, double b1, double b2) {
+  return a1 > 0 && a2 > 0 && b1 >= 0 && b2 >= 0 && b1 < a1 && b2 < a2 && std::isfinite(a1 * a2 * b1 * b2);
+}
+
+// Elasticity tensor diagonal of eq. 2.13: (GA1, GA2, EA) and (EI1, EI2, GJ).
+struct Stiffness {
+  Vec3 CG;  // GA1, GA2, EA (N)
+  Vec3 CK;  // EI1, EI2, GJ (N m^2)
+};
+// kshear: shear correction factor (Timoshenko); stiff_scale multiplies EA, GA1, GA2 only.
+inline Stiffness section_stiffness(const Section &s, double E, double G, double kshear,
+                                   double stiff_scale = 1.0) {
+  return {{stiff_scale * kshear * G * s.A, stiff_scale * kshear * G * s.A, stiff_scale * E * s.A},
+          {E * s.I1, E * s.I2, G * s.J}};
+}
+
+// ------------------------------------------------------------------------------------------
+// element
+// ------------------------------------------------------------------------------------------
+struct ElementRef {
+  double L0 = 0;  // reference length, m
+  Vec3 gamma0;    // reference (material) strain Gamma0
+  Vec3 kappa0;    // reference curvature/twist kappa0, 1/m
+};
+inline Quat mid_rotation(Quat qA, Quat qB, Vec3 *theta_out = nullptr) {
+  const Vec3 th = qlog(qmul(qconj(qA), qB));
+  if (theta_out) *theta_out = th;
+  return qmul(qA, qexp(0.5 * th));
+}
+// Reference strains of an element from its stress-free configuration.
+inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
+  ElementRef r;
+  Vec3 th;
+  const Quat qm = mid_rotation(qA, qB, &th);
+  const Vec3 d = xB - xA;
+  r.L0 = norm(d);
+  r.gamma0 = (1.0 / r.L0) * qrot_t(qm, d) - Vec3{0, 0, 1};
+  r.kappa0 = (1.0 / r.L0) * th;
+  return r;
+}
+
+struct ElementForces {
+  Vec3 fA, fB;  // forces on the nodes, N
+  Vec3 tA, tB;  // torques on the nodes (space frame), N m
+  double energy = 0;  // stored energy, J
+  double dissipation = 0;  // damping power (>= 0), W
+};
+
+struct NodeState {
+  Vec3 x;  // position
+  Quat q;  // frame
+  Vec3 v;  // velocity (damping only)
+  Vec3 w;  // angular velocity, space frame (damping only)
+};
+
+// Forces of one element. t_damp = 0: elastic only (velocities unused).
+inline ElementForces element_forces(const NodeState &A, const NodeState &B, const ElementRef &ref,
+                                    const Stiffness &C, double t_damp = 0.0) {
+  ElementForces out;
+  Vec3 th;
+  const Quat qm = mid_rotation(A.q, B.q, &th);
+  const Vec3 d = B.x - A.x;
+  const double L0 = ref.L0;
+  const Vec3 gamma = (1.0 / L0) * qrot_t(qm, d) - Vec3{0, 0, 1} - ref.gamma0;
+  const Vec3 kappa = (1.0 / L0) * th - ref.kappa0;
+  const Vec3 N = hadamard(C.CG, gamma);
+  const Vec3 M = hadamard(C.CK, kappa);
+  out.energy = 0.5 * L0 * (dot(N, gamma) + dot(M, kappa));
+
+  const Vec3 n = qrot(qm, N);
+  const Vec3 m = qrot(A.q, jl_inv_t(th, M));
+  const Vec3 u = cross(d, n);
+  // P u = 1/2 R_A J_l(th)^-T J_l(th/2)^T R_A^T u
+  const Vec3 Pu = qrot(A.q, 0.5 * jl_inv_t(th, jl_t(0.5 * th, qrot_t(A.q, u))));
+  out.fA = n;
+  out.fB = -1.0 * n;
+  out.tA = u - Pu + m;
+  out.tB = Pu - m;
+
+  if (t_damp > 0.0) {
+    const Vec3 wm = 0.5 * (A.w + B.w);
+    const Vec3 gdot = (1.0 / L0) * qrot_t(qm, B.v - A.v - cross(wm, d));
+    const Vec3 kdot = (1.0 / L0) * qrot_t(qm, B.w - A.w);
+    const Vec3 Nd = t_damp * hadamard(C.CG, gdot);
+    const Vec3 Md = t_damp * hadamard(C.CK, kdot);
+    const Vec3 nd = qrot(qm, Nd);
+    const Vec3 md = qrot(qm, Md);
+    const Vec3 half = 0.5 * cross(d, nd);
+    out.fA = out.fA + nd;
+    out.fB = out.fB - nd;
+    out.tA = out.tA + md + half;
+    out.tB = out.tB - md + half;
+    out.dissipation = L0 * (dot(Nd, gdot) + dot(Md, kdot));
+  }
+  return out;
+}
+
+// ------------------------------------------------------------------------------------------
+// explicit time-step limits (velocity Verlet: dt < 2/omega) from the exact eigenvalues of one
+// straight element with lumped half masses / half rotary inertias at its two nodes; the global
+// maximum frequency is bounded by the largest element frequency (element eigenvalue theorem).
+// ------------------------------------------------------------------------------------------
+struct CriticalSteps {
+  double axial, shear, bending, torsion;  // s
+  double min() const { return std::min(std::min(axial, shear), std::min(bending, torsion)); }
+};
+// Stiffness C is the (possibly scaled) element stiffness; rho A and rho*inertia_scale*I give the
+// masses. t_damp: stiffness-proportional damping time (reduces the stable step).
+inline double stable_step(double omega2, double t_damp) {
+  if (!(omega2 > 0)) return INFINITY;
+  const double om = std::sqrt(omega2);
+  const double xi = 0.5 * t_damp * om;
+  return 2.0 / om * (std::sqrt(1.0 + xi * xi) - xi);
+}
+inline CriticalSteps critical_steps(const Section &s, const Stiffness &C, double L, double rho,
+                                    double inertia_scale, double t_damp) {
+  const double mA = rho * s.A;  // mass per length
+  const double j1 = inertia_scale * rho * s.I1, j2 = inertia_scale * rho * s.I2,
+               jp = inertia_scale * rho * s.Ip;
+  const double L2 = L * L;
+  CriticalSteps c;
+  c.axial = stable_step(4.0 * C.CG.z / (mA * L2), t_damp);
+  // shear along t1 couples to rotation about t2 and vice versa (rank-one stiffness: add)
+  const double w_s1 = 4.0 * C.CG.x / (mA * L2) + C.CG.x / j2;
+  const double w_s2 = 4.0 * C.CG.y / (mA * L2) + C.CG.y / j1;
+  c.shear = stable_step(std::max(w_s1, w_s2), t_damp);
+  c.bending = stable_step(std::max(4.0 * C.CK.x / (j1 * L2), 4.0 * C.CK.y / (j2 * L2)), t_damp);
+  c.torsion = stable_step(4.0 * C.CK.z / (jp * L2), t_damp);
+  return c;
+}
+
+// ------------------------------------------------------------------------------------------
+// rotation integrator: free rigid-body rotation with body inertia J = (J1, J2, J3) over a step h,
+// symmetric splitting R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2) (Dullweber-Leimkuhler-McLachlan).
+// Lb is the body-frame angular momentum; q is updated by body-fixed rotations.
+// ------------------------------------------------------------------------------------------
+inline void rotate_body_axis(int k, double h, const Vec3 &J, Quat &q, Vec3 &Lb) {
+  const double phi = h * Lb[k] / J[k];
+  const double c = std::cos(phi), s = std::sin(phi);
+  // Lb' = Rk(phi)^T Lb (angular momentum seen from the rotated body)
+  const int i = (k + 1) % 3, j = (k + 2) % 3;
+  const double li = Lb[i], lj = Lb[j];
+  Lb[i] = c * li + s * lj;
+  Lb[j] = -s * li + c * lj;
+  Quat r{std::cos(0.5 * phi), 0, 0, 0};
+  const double sh = std::sin(0.5 * phi);
+  if (k == 0) r.x = sh;
+  else if (k == 1) r.y = sh;
+  else r.z = sh;
+  q = qmul(q, r);
+}
+inline void free_rotation(double h, const Vec3 &J, Quat &q, Vec3 &Lb) {
+  if (J.x == J.y && J.y == J.z) {
+    // isotropic: one exact rotation about the (constant) angular velocity
+    q = qmul(q, qexp((h / J.x) * Lb));
+  } else {
+    rotate_body_axis(0, 0.5 * h, J, q, Lb);
+    rotate_body_axis(1, 0.5 * h, J, q, Lb);
+    rotate_body_axis(2, h, J, q, Lb);
+    rotate_body_axis(1, 0.5 * h, J, q, Lb);
+    rotate_body_axis(0, 0.5 * h, J, q, Lb);
+  }
+  q = qnormalize(q);
+}
+
+}  // namespace fiberform::physics::beam
+
+#endif

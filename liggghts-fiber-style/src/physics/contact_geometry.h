@@ -1,0 +1,95 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Contact-point geometry on fiber elements (thesis section 2.4.3-2.4.4). An element is the
+   straight segment between two consecutive fiber nodes xa -> xb. It carries n contact points at
+   the fractions s_k = (k + 1/2)/n, k = 0..n-1 (uniform along the centre line). Pure functions. */
+#ifndef FIBERFORM_PHYSICS_CONTACT_GEOMETRY_H
+#define FIBERFORM_PHYSICS_CONTACT_GEOMETRY_H
+
+#include <cmath>
+
+namespace fiberform::physics {
+
+struct Vec3 {
+  double x, y, z;
+};
+inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+inline Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline Vec3 operator*(double s, Vec3 a) { return {s * a.x, s * a.y, s * a.z}; }
+inline double dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Vec3 cross(Vec3 a, Vec3 b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double norm(Vec3 a) { return std::sqrt(dot(a, a)); }
+
+inline double point_fraction(int k, int n) { return (k + 0.5) / n; }
+inline Vec3 lerp(Vec3 a, Vec3 b, double s) { return a + s * (b - a); }
+
+// Index of the contact point of an element (xa -> xb, n points) closest to p.
+inline int closest_point_index(Vec3 xa, Vec3 xb, int n, Vec3 p) {
+  const Vec3 e = xb - xa;
+  const double L2 = dot(e, e);
+  double t = L2 > 0 ? dot(p - xa, e) / L2 : 0.5;
+  int k = static_cast<int>(std::floor(t * n));
+  if (k < 0) k = 0;
+  if (k > n - 1) k = n - 1;
+  return k;
+}
+
+// ---- rectangular cross-sections (thesis 2.4.3): points are moved from the centre line towards
+// the partner along the line between the two centres until they reach the element surface.
+// The element is a prism with width w along e_w and thickness t along e_t (both orthogonal to
+// the axis). Returns the distance from the centre line point to the surface along unit dir u.
+inline double rect_surface_distance(Vec3 axis_unit, Vec3 e_t, double width, double thickness, Vec3 u) {
+  const Vec3 e_w = cross(e_t, axis_unit);
+  const double cw = std::fabs(dot(u, e_w)), ct = std::fabs(dot(u, e_t));
+  const double big = 1e300;
+  const double dw = cw > 0 ? 0.5 * width / cw : big;
+  const double dt = ct > 0 ? 0.5 * thickness / ct : big;
+  return dw < dt ? dw : dt;
+}
+
+// Thickness direction of a flat (rectangular) element: the reference direction `up` (default
+// global z) made orthogonal to the axis; falls back to x if the axis is parallel to `up`.
+inline Vec3 rect_thickness_dir(Vec3 axis_unit, Vec3 up) {
+  Vec3 t = up - dot(up, axis_unit) * axis_unit;
+  double n = norm(t);
+  if (n < 1e-8) {
+    const Vec3 x{1, 0, 0};
+    t = x - dot(x, axis_unit) * axis_unit;
+    n = norm(t);
+  }
+  return (1.0 / n) * t;
+}
+
+// ---- force transfer to the nodes (thesis 2.4.2). A force F acting at the centre-line point of
+// fraction s plus an offset r_off (surface point - centre-line point) becomes node forces
+// (1-s)F, sF (force and moment about any point preserved for the centre-line part) and the
+// moment r_off x F of the off-centre-line part, split equally between the two nodes.
+struct NodeLoads {
+  Vec3 fa, fb, ta, tb;
+};
+inline NodeLoads transfer_to_nodes(double s, Vec3 F, Vec3 r_off) {
+  const Vec3 t = 0.5 * cross(r_off, F);
+  return {(1.0 - s) * F, s * F, t, t};
+}
+
+// Force per unit length between two parallel cylinders (radii R1, R2, surface gap h) from the
+// van der Waals interaction (Israelachvili, Intermolecular and Surface Forces, table 13.1):
+//   F/L = -A / (8 sqrt(2) h^(5/2)) * sqrt(R1 R2 / (R1 + R2)).
+inline double parallel_cylinders_vdw_per_length(double A, double R1, double R2, double h) {
+  return -A / (8.0 * std::sqrt(2.0) * std::pow(h, 2.5)) * std::sqrt(R1 * R2 / (R1 + R2));
+}
+
+// Number of contact points per element length Le such that point-pair van der Waals forces
+// (eq. 2.25, spacing Le/n) sum to the parallel-cylinder result at the matching gap h_match:
+//   A R/(6 h^2) / spacing = A sqrt(R)/(8 sqrt2 h^2.5)  =>  spacing = (4 sqrt2 / 3) sqrt(R h).
+inline int points_per_element(double Le, double R1, double R2, double h_match) {
+  const double R = R1 * R2 / (R1 + R2);
+  const double spacing = 4.0 * std::sqrt(2.0) / 3.0 * std::sqrt(R * h_match);
+  int n = static_cast<int>(std::lround(Le / spacing));
+  return n < 1 ? 1 : n;
+}
+
+}  // namespace fiberform::physics
+
+#endif

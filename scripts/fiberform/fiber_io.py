@@ -1,0 +1,161 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Fiber chains on disk for ``fix fiber/beam``: the LIGGGHTS data file and the nodes file.
+
+A fiber is a chain of ``n`` nodes with positions ``x`` (n, 3) in m, cross-section frames as unit
+quaternions ``q`` (n, 4) ordered (w, x, y, z) with ``t_I = R(q) e_I`` (t3 the tangent), and section
+radii ``radii`` (n, 4) = (a1, a2, b1, b2) in m (outer and inner semi-axes along t1 and t2,
+thesis sec. 3.4).
+
+Files (format: docs/styles/fix_fiber_beam.md):
+
+* data file (``read_data``, ``atom_style sphere``): ``atom-ID type diameter density x y z``, one
+  atom per node, the nodes of a fiber with consecutive IDs (node 0 first). The diameter is
+  ``2 max(a1, a2)`` (the contact envelope); the mass is reset by fix fiber/beam from the section.
+* nodes file (``fix fiber/beam ... nodes FILE``):
+  ``atom-ID fiber-ID node-index node-count a1 a2 b1 b2 x0 y0 z0 q0w q0x q0y q0z [qw qx qy qz]``
+  with the stress-free reference (x0, q0) and optionally a different initial frame q.
+
+All numbers are written with ``repr`` (shortest round-trip text), so a reference written here and
+the initial positions in the data file agree to the last bit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "Fiber",
+    "quat_from_frames",
+    "quat_rotate",
+    "quat_to_frames",
+    "read_nodes_file",
+    "write_fibers_liggghts",
+]
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclass
+class Fiber:
+    """One fiber: reference (stress-free) nodes; ``x_init``/``q_init`` optionally a different
+    initial state (tests start deformed from a straight reference)."""
+
+    x: Array  # (n, 3) m
+    q: Array  # (n, 4) unit quaternions (w, x, y, z)
+    radii: Array  # (n, 4) a1, a2, b1, b2 in m
+    x_init: Array | None = None
+    q_init: Array | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.x.shape[0])
+
+
+def quat_from_frames(t1: Array, t2: Array, t3: Array) -> Array:
+    """Unit quaternions (w, x, y, z) of rotation matrices with columns t1, t2, t3 (each (n, 3))."""
+    t1, t2, t3 = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (t1, t2, t3))
+    m = np.stack([t1, t2, t3], axis=-1)  # (n, 3, 3), columns
+    out = np.empty((m.shape[0], 4))
+    for k, r in enumerate(m):
+        tr = r[0, 0] + r[1, 1] + r[2, 2]
+        if tr > 0:
+            s = 2.0 * math.sqrt(tr + 1.0)
+            q = (0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s)
+        elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+            s = 2.0 * math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+            q = ((r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s)
+        elif r[1, 1] > r[2, 2]:
+            s = 2.0 * math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+            q = ((r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s)
+        else:
+            s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+            q = ((r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s)
+        qa = np.array(q)
+        out[k] = qa / np.linalg.norm(qa)
+    return out
+
+
+def quat_rotate(q: Array, v: Array) -> Array:
+    """R(q) v for arrays of quaternions (n, 4) and vectors (n, 3) or (3,)."""
+    q = np.atleast_2d(q)
+    v = np.broadcast_to(np.asarray(v, dtype=float), (q.shape[0], 3))
+    w, u = q[:, :1], q[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_to_frames(q: Array) -> tuple[Array, Array, Array]:
+    """(t1, t2, t3), each (n, 3), of quaternions (n, 4)."""
+    e = np.eye(3)
+    return quat_rotate(q, e[0]), quat_rotate(q, e[1]), quat_rotate(q, e[2])
+
+
+def _r(x: float) -> str:
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f"refusing to write a non-finite number {x!r}")
+    return repr(x)
+
+
+def write_fibers_liggghts(
+    data_path: Path,
+    nodes_path: Path,
+    fibers: Sequence[Fiber],
+    box_lo: Sequence[float],
+    box_hi: Sequence[float],
+    *,
+    density_kg_m3: float = 1500.0,
+    atom_type: int = 1,
+    first_fiber_id: int = 1,
+    title: str = "fiberform fibers (fix fiber/beam)",
+) -> int:
+    """Write the data file and nodes file; returns the number of atoms. Atom IDs start at 1."""
+    data = [f"# {title}", ""]
+    natoms = sum(f.n for f in fibers)
+    data += [f"{natoms} atoms", "1 atom types", ""]
+    for k, ax in enumerate("xyz"):
+        data.append(f"{_r(box_lo[k])} {_r(box_hi[k])} {ax}lo {ax}hi")
+    data += ["", "Atoms", ""]
+    nodes = [
+        "# fix fiber/beam nodes file: atom-ID fiber-ID node-index node-count a1 a2 b1 b2 "
+        "x0 y0 z0 q0w q0x q0y q0z [qw qx qy qz]   (SI units)"
+    ]
+    tag = 0
+    for fi, f in enumerate(fibers):
+        if f.n < 2:
+            raise ValueError("a fiber needs at least 2 nodes")
+        xi = f.x if f.x_init is None else f.x_init
+        qi = f.q if f.q_init is None else f.q_init
+        for k in range(f.n):
+            tag += 1
+            a1, a2, b1, b2 = (float(v) for v in f.radii[k])
+            diam = 2.0 * max(a1, a2)
+            data.append(
+                f"{tag} {atom_type} {_r(diam)} {_r(density_kg_m3)} "
+                f"{_r(xi[k, 0])} {_r(xi[k, 1])} {_r(xi[k, 2])}"
+            )
+            vals = [a1, a2, b1, b2, *f.x[k], *f.q[k]]
+            line = f"{tag} {first_fiber_id + fi} {k} {f.n} " + " ".join(_r(v) for v in vals)
+            if f.q_init is not None:
+                line += " " + " ".join(_r(v) for v in qi[k])
+            nodes.append(line)
+    Path(data_path).write_text("\n".join(data) + "\n")
+    Path(nodes_path).write_text("\n".join(nodes) + "\n")
+    return natoms
+
+
+def read_nodes_file(path: Path) -> npt.NDArray[np.float64]:
+    """The nodes file as an array (rows: atom-ID fiber-ID index count a1 a2 b1 b2 x0 y0 z0 q0...)."""
+    rows = []
+    for line in Path(path).read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            rows.append([float(v) for v in line.split()])
+    width = max(len(r) for r in rows)
+    return np.array([r + [math.nan] * (width - len(r)) for r in rows])
