@@ -20,6 +20,8 @@ PINNED=(
   "python3="
   "python3-venv="
   "xz-utils="
+  "patch="
+  "bzip2="
 )
 
 missing=()

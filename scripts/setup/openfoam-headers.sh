@@ -45,22 +45,38 @@ fi
 have_source() {
     apt-cache showsrc --only-source "$pkg" 2>/dev/null | grep -qx "Version: $want_src"
 }
+# The archive that provided the installed binary, from apt's own policy table: "URI SUITE/COMPONENT".
+archive_of_installed() {
+    apt-cache policy "$pkg" 2>/dev/null | awk -v v="$bin_ver" '
+        /^ +(\*\*\* )?[^ ]+ [0-9]+$/ { cur = ($1 == "***") ? $2 : $1; next }
+        cur == v && $2 ~ /^(https?|file|cdrom):/ { print $2, $3; exit }'
+}
 if ! have_source; then
-    [[ -r $debian_list ]] || die "no deb-src entry for $pkg and no $debian_list to derive one from;
-add a deb-src line for the Debian archive that provides $pkg $bin_ver, run apt-get update, rerun"
-    # Same stanzas as the binary archive, with Types: deb-src (deb822 format).
-    new_list=$(awk '/^Types:/ { print "Types: deb-src"; next } { print }' "$debian_list")
-    if [[ $(id -u) -ne 0 ]]; then
-        die "apt has no deb-src entry for $pkg. As root, run:
-  awk '/^Types:/ { print \"Types: deb-src\"; next } { print }' $debian_list > $src_list
-  apt-get update
-then rerun $0"
+    if [[ -r $debian_list ]]; then
+        # deb822 (Debian 12 container images): the same stanzas with Types: deb-src.
+        list_file=$src_list
+        new_list=$(awk '/^Types:/ { print "Types: deb-src"; next } { print }' "$debian_list")
+        origin=$debian_list
+    else
+        # one-line format (/etc/apt/sources.list, Debian installer): derive the entry from the
+        # archive apt installed the binary package from.
+        read -r uri suite_comp < <(archive_of_installed) ||
+            die "cannot tell which archive provided $pkg $bin_ver (apt-cache policy $pkg);
+add a deb-src line for it, run apt-get update, rerun"
+        list_file=${src_list%.sources}.list
+        new_list="deb-src $uri ${suite_comp%%/*} ${suite_comp#*/}"
+        origin="apt-cache policy $pkg"
     fi
-    say "adding $src_list (deb-src for the archive in $debian_list) and running apt-get update"
-    printf '# Written by fiberform scripts/setup/openfoam-headers.sh: source packages of the\n# archive in %s, needed for OpenFOAM headers.\n%s\n' \
-        "$debian_list" "$new_list" >"$src_list"
+    if [[ $(id -u) -ne 0 ]]; then
+        die "apt has no deb-src entry for $pkg. As root, write to $list_file:
+$new_list
+then run apt-get update and rerun $0"
+    fi
+    say "adding $list_file (deb-src for the archive of $pkg, from $origin) and running apt-get update"
+    printf '# Written by fiberform scripts/setup/openfoam-headers.sh: source packages of the\n# archive that provides openfoam (from %s), needed for OpenFOAM headers.\n%s\n' \
+        "$origin" "$new_list" >"$list_file"
     apt-get update -qq
-    have_source || die "apt still does not offer source package $pkg=$want_src after adding $src_list"
+    have_source || die "apt still does not offer source package $pkg=$want_src after adding $list_file"
 fi
 
 # --- 4. download (apt verifies the hashes from the signed Release file) -----------------------
