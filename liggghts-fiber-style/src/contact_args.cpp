@@ -98,6 +98,9 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
   if (!std::strcmp(kw, "h_R")) { L.steric.h_R = num(1); return 2; }
   if (!std::strcmp(kw, "h_S")) { L.steric.h_S = num(1); return 2; }
   if (!std::strcmp(kw, "t_R")) { L.steric.t_R = num(1); return 2; }
+  if (!std::strcmp(kw, "h_cap")) { L.steric.h_cap = num(1); return 2; }
+  if (!std::strcmp(kw, "h_D")) { L.steric.h_D = num(1); return 2; }
+  if (!std::strcmp(kw, "h_S4")) { L.steric.h_S4 = num(1); return 2; }
   if (!std::strcmp(kw, "section")) {
     if (iarg + 1 < narg && !std::strcmp(arg[iarg + 1], "circle")) { c.section = Section::Circle; return 2; }
     if (iarg + 1 < narg && !std::strcmp(arg[iarg + 1], "rect")) {

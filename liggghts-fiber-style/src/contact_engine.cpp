@@ -10,6 +10,7 @@
 #include "atom.h"
 #include "domain.h"
 #include "error.h"
+#include "fix_fiber_beam.h"
 #include "lammps.h"
 #include "neigh_list.h"
 #include "physics/contact_geometry.h"
@@ -30,8 +31,10 @@ double vlen(const double *p) { return std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2]
 ContactEngine::ContactEngine(LAMMPS *lmp) : Pointers(lmp) {}
 
 void ContactEngine::init() {
-  if (!atom->molecule_flag)
-    error->all(FLERR, "fiber/dlvo: needs molecule IDs (fiber IDs): use atom_style hybrid sphere molecular");
+  beam_ = FixFiberBeam::find(lmp);
+  if (!atom->molecule_flag && !beam_)
+    error->all(FLERR, "fiber/dlvo: needs fiber topology: a fix fiber/beam, or molecule IDs as fiber IDs "
+                      "(atom_style hybrid sphere molecular)");
   if (!atom->radius_flag || !atom->rmass_flag)
     error->all(FLERR, "fiber/dlvo: needs per-atom radius and mass (atom_style sphere)");
   if (atom->map_style == 0) error->all(FLERR, "fiber/dlvo: needs 'atom_modify map array' (node look-up by ID)");
@@ -40,13 +43,31 @@ void ContactEngine::init() {
                         cfg.nsub, cfg.rtol, cfg.atol);
 }
 
+int ContactEngine::fiber_of(int i) const {
+  if (beam_ && beam_->is_node(i)) return beam_->fiber_id(i);
+  return atom->molecule_flag ? atom->molecule[i] : -1;
+}
+
 int ContactEngine::next_node(int i) const {
+  if (beam_ && beam_->is_node(i)) {
+    if (beam_->node_index(i) >= beam_->node_count(i) - 1) return -1;
+    const int j = atom->map(atom->tag[i] + 1);
+    if (j < 0 || !beam_->is_node(j) || beam_->fiber_id(j) != beam_->fiber_id(i)) return -1;
+    return domain->closest_image(i, j);
+  }
+  if (!atom->molecule_flag) return -1;
   int j = atom->map(atom->tag[i] + 1);
   if (j < 0 || atom->molecule[j] != atom->molecule[i]) return -1;
   return domain->closest_image(i, j);
 }
 int ContactEngine::prev_node(int i) const {
-  if (atom->tag[i] <= 1) return -1;
+  if (beam_ && beam_->is_node(i)) {
+    if (beam_->node_index(i) <= 0) return -1;
+    const int j = atom->map(atom->tag[i] - 1);
+    if (j < 0 || !beam_->is_node(j) || beam_->fiber_id(j) != beam_->fiber_id(i)) return -1;
+    return domain->closest_image(i, j);
+  }
+  if (!atom->molecule_flag || atom->tag[i] <= 1) return -1;
   int j = atom->map(atom->tag[i] - 1);
   if (j < 0 || atom->molecule[j] != atom->molecule[i]) return -1;
   return domain->closest_image(i, j);
@@ -93,7 +114,7 @@ bool ContactEngine::make_element(int i, const NodeData &nd, Element &e) const {
   e.a = i;
   e.b = j;
   e.tag = atom->tag[i];
-  e.mol = atom->molecule[i];
+  e.mol = fiber_of(i);
   e.xa = vec(x[i]);
   e.xb = vec(x[j]);
   const Vec3 d = e.xb - e.xa;
@@ -142,6 +163,67 @@ void ContactEngine::apply(const Element &e, int k, Vec3 r_off, Vec3 fpre, Vec3 f
   if (post) add(out.fpost, out.tpost, fpost);
 }
 
+namespace {
+inline std::uint64_t point_id(int tag, int k) { return (std::uint64_t(tag) << 20) | std::uint64_t(k); }
+// distance from p to the segment a-b
+double segment_distance(Vec3 a, Vec3 b, Vec3 p) {
+  const Vec3 e = b - a;
+  const double L2 = dot(e, e);
+  double t = L2 > 0 ? dot(p - a, e) / L2 : 0.0;
+  t = t < 0 ? 0 : (t > 1 ? 1 : t);
+  return norm(lerp(a, b, t) - p);
+}
+}  // namespace
+
+bool ContactEngine::mutual_closest(const Element &A, int k, const Element &B, int q, double dist) const {
+  const Vec3 p = lerp(B.xa, B.xb, physics::point_fraction(q, B.n));
+  const std::uint64_t idk = point_id(A.tag, k);
+  const bool same_fiber = A.mol == B.mol;
+  double **x = atom->x;
+  // an element (i -> j) of A's fiber; false if one of its points beats (dist, idk)
+  auto beats = [&](int i, int j, bool &further) {
+    const Vec3 xa = vec(x[i]), xb = vec(x[j]);
+    further = segment_distance(xa, xb, p) <= dist;
+    if (!further) return false;
+    const int tag = atom->tag[i];
+    if (same_fiber && std::abs(tag - B.tag) < 2) return false;  // self contact: not adjacent elements
+    const double len = norm(xb - xa);
+    double r = 0.5 * (atom->radius[i] + atom->radius[j]);
+    if (cfg.section == Section::Rect) r = 0.5 * std::min(cfg.width, cfg.thickness);
+    const int n = npoints_for(len, r);
+    const int kk = physics::closest_point_index(xa, xb, n, p);
+    const double d = norm(lerp(xa, xb, physics::point_fraction(kk, n)) - p);
+    return d < dist || (d == dist && point_id(tag, kk) < idk);
+  };
+  bool further = true;
+  // A itself: k is the closest point of A to p unless the projection says otherwise
+  {
+    const int kk = physics::closest_point_index(A.xa, A.xb, A.n, p);
+    if (kk != k) {
+      const double d = norm(lerp(A.xa, A.xb, physics::point_fraction(kk, A.n)) - p);
+      if (d < dist || (d == dist && point_id(A.tag, kk) < idk)) return false;
+    }
+  }
+  // backwards along the chain
+  int cur = A.a;
+  for (int steps = 0; steps < 100000; ++steps) {
+    const int pv = prev_node(cur);
+    if (pv < 0) break;
+    if (beats(pv, cur, further)) return false;
+    if (!further) break;
+    cur = pv;
+  }
+  cur = A.b;
+  for (int steps = 0; steps < 100000; ++steps) {
+    const int nx = next_node(cur);
+    if (nx < 0) break;
+    if (beats(cur, nx, further)) return false;
+    if (!further) break;
+    cur = nx;
+  }
+  return true;
+}
+
 void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const NodeData &nd, const NodeSinks &out) {
   cache_.clear();
   const physics::ContactLaw &L = cfg.law;
@@ -162,12 +244,11 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
     const int *jl = list->firstneigh[i];
     for (int jj = 0; jj < list->numneigh[i]; ++jj) {
       const int j = jl[jj] & NEIGHMASK;
-      if (atom->molecule[j] == A.mol) {
-        if (!cfg.self_contact) continue;
-        const int dtag = std::abs(atom->tag[j] - A.tag);
-        if (dtag < 2) continue;  // the same or an adjacent element
-      }
       if (!make_element(j, nd, B)) continue;
+      if (B.mol == A.mol) {
+        if (!cfg.self_contact) continue;
+        if (std::abs(B.tag - A.tag) < 2) continue;  // the same or an adjacent element
+      }
       // element-level range test: closest approach of the two centre-line segments
       const double allow = (A.vmax + B.vmax) * dt + 0.5 * (A.amax + B.amax) * dt * dt;
       const double rr = (cfg.section == Section::Circle ? A.radius + B.radius
@@ -186,12 +267,13 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
       }
     }
     if (cand_.empty()) continue;
-    // for each point, only the closest point on each interacting fiber (thesis 2.4.4)
-    std::sort(cand_.begin(), cand_.end(), [](const Candidate &x, const Candidate &y) {
+    // for each point, only the closest point on each interacting fiber (thesis 2.4.4); ties by
+    // point id, the same total order as in mutual_closest
+    std::sort(cand_.begin(), cand_.end(), [this](const Candidate &x, const Candidate &y) {
       if (x.k != y.k) return x.k < y.k;
       if (x.mol != y.mol) return x.mol < y.mol;
       if (x.dist != y.dist) return x.dist < y.dist;
-      return x.elem < y.elem;
+      return point_id(partners_[x.elem].tag, x.q) < point_id(partners_[y.elem].tag, y.q);
     });
     for (std::size_t c = 0; c < cand_.size(); ++c) {
       if (c > 0 && cand_[c].k == cand_[c - 1].k && cand_[c].mol == cand_[c - 1].mol) continue;
@@ -200,7 +282,7 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
       PointState s1 = point_state(A, cd.k, nd), s2 = point_state(Bq, cd.q, nd);
       if (s1.inv_m == 0.0 && s2.inv_m == 0.0) continue;
       PairGeometry g;
-      Vec3 r_off{0, 0, 0};
+      Vec3 r_off{0, 0, 0}, r_offB{0, 0, 0};
       const Vec3 d = s2.p - s1.p;
       const double dist = norm(d);
       if (!(dist > 0)) continue;
@@ -211,24 +293,44 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
         const double dA = physics::rect_surface_distance(A.axis, A.e_t, cfg.width, cfg.thickness, u);
         const double dB = physics::rect_surface_distance(Bq.axis, Bq.e_t, cfg.width, cfg.thickness, u);
         r_off = dA * u;
+        r_offB = -dB * u;
         s1.p = s1.p + r_off;
-        s2.p = s2.p - dB * u;
+        s2.p = s2.p + r_offB;
         g.offset = 0.0;
       }
       const double hs = cfg.section == Section::Circle ? dist - g.offset : norm(s2.p - s1.p);
       const double vrel = norm(s2.v - s1.v), arel = norm(s2.a - s1.a);
       if (hs - vrel * dt - 0.5 * arel * dt * dt > L.h_cut) continue;
       ++stats.in_range;
+      // momentum: a MUTUAL pair (each point the other's closest on the other fiber) is selected by
+      // both sides; each side applies its own point's share of the one canonical solve. A
+      // ONE-SIDED pair is selected by this side only: it is solved here with half the force (the
+      // average of action on this side and no reaction) and applied to BOTH points.
+      const bool mutual = mutual_closest(A, cd.k, Bq, cd.q, cd.dist);
       law.setup(L, A.rep_radius, Bq.rep_radius, s1.inv_m, s2.inv_m, Yof(A.rep_radius), Yof(Bq.rep_radius));
+      if (!mutual) {
+        law.scale = 0.5;
+        ++stats.one_sided;
+      }
       if (!subintegrate) {
         const Vec3 F = ContactIntegrator::instantaneous_force(law, g, s1, s2);
         apply(A, cd.k, r_off, F, F, out, false);
+        if (!mutual) apply(Bq, cd.q, r_offB, -1.0 * F, -1.0 * F, out, false);
+        continue;
+      }
+      if (!mutual) {
+        const PairResult r = integrator_.solve(law, g, s1, s2, dt);
+        ++stats.solves;
+        stats.rhs_evals += r.rhs_evals;
+        if (!r.ok) ++stats.failures;
+        apply(A, cd.k, r_off, r.fpos1, r.fvel1, out, true);
+        apply(Bq, cd.q, r_offB, r.fpos2, r.fvel2, out, true);
         continue;
       }
       // canonical order (lower point id first) makes both sides of a mutual pair run the
       // bit-identical solve; on one rank the second side is served from the cache
-      const std::uint64_t idA = (std::uint64_t(A.tag) << 20) | std::uint64_t(cd.k);
-      const std::uint64_t idB = (std::uint64_t(Bq.tag) << 20) | std::uint64_t(cd.q);
+      const std::uint64_t idA = point_id(A.tag, cd.k);
+      const std::uint64_t idB = point_id(Bq.tag, cd.q);
       const bool swap = idB < idA;
       const Key key{swap ? idB : idA, swap ? idA : idB};
       PairResult r;

@@ -3,8 +3,11 @@
    chains of atoms, contact points on elements, the closest-point selection (thesis 2.4.3-2.4.4),
    the per-pair solve and the transfer of the averaged forces to the element nodes (2.4.2).
 
-   Fiber topology (until fix fiber/beam provides more): an atom's molecule ID is its fiber ID; the
-   atom with ID tag+1 and the same molecule ID is the next node. Element = (node, next node),
+   Fiber topology: when a fix fiber/beam exists, its per-node fiber ID, node index and node count
+   (accessors of FixFiberBeam) define the chains: the next node of node k < count-1 is atom ID
+   tag+1. Atoms that are not fiber/beam nodes (or all atoms, without fix fiber/beam) fall back to
+   molecule IDs: the molecule ID is the fiber ID and the atom with ID tag+1 and the same molecule
+   ID is the next node. Element = (node, next node),
    owned by the rank that owns its first node. The mass of a node is shared equally by the
    elements it belongs to, so the contact points of a fiber carry exactly the fiber's mass:
    element mass = m_a/deg_a + m_b/deg_b, point mass = element mass / points per element. */
@@ -21,6 +24,7 @@
 
 namespace LAMMPS_NS {
 class NeighList;
+class FixFiberBeam;
 }
 
 namespace fiberform {
@@ -44,7 +48,7 @@ struct EngineConfig {
 };
 
 struct EngineStats {
-  long candidates = 0, in_range = 0, solves = 0, cache_hits = 0, rhs_evals = 0, failures = 0;
+  long candidates = 0, in_range = 0, solves = 0, cache_hits = 0, rhs_evals = 0, failures = 0, one_sided = 0;
 };
 
 // Per-atom arrays the engine reads (local + ghost, index as atom arrays).
@@ -81,6 +85,8 @@ class ContactEngine : protected LAMMPS_NS::Pointers {
   // Next node of atom i (local or ghost; closest image), or -1 at a chain end.
   int next_node(int i) const;
   int prev_node(int i) const;
+  // Fiber ID of atom i (fix fiber/beam's, else the molecule ID).
+  int fiber_of(int i) const;
   // m_i/deg_i for the local atoms into share[0..nlocal).
   void compute_shares(double *share) const;
   // Largest element length over all ranks (m) and largest atom radius.
@@ -108,11 +114,15 @@ class ContactEngine : protected LAMMPS_NS::Pointers {
     double vmax, amax;    // node speed / acceleration bounds (for the range test)
   };
   bool make_element(int i, const NodeData &nd, Element &e) const;
+  // Is point k of element A the closest point of A's fiber to point q of element B (order: distance,
+  // then point id)? Walks A's chain from A in both directions.
+  bool mutual_closest(const Element &A, int k, const Element &B, int q, double dist) const;
   PointState point_state(const Element &e, int k, const NodeData &nd) const;
   void apply(const Element &e, int k, Vec3 r_off, Vec3 fpre, Vec3 fpost, const NodeSinks &out, bool post);
   int npoints_for(double len, double r) const;
 
   ContactIntegrator integrator_;
+  LAMMPS_NS::FixFiberBeam *beam_ = nullptr;
   struct Key {
     std::uint64_t a, b;
     bool operator==(const Key &o) const { return a == o.a && b == o.b; }

@@ -138,23 +138,36 @@ int main() {
     StericParams p{1e-9, 0.5e-9, 1e-9, 1e-8};
     const double mu = 1e-14, rsum = 14e-6;
     expect(bell1(p, -1e-9) == 1.0 && bell1(p, p.h_R) == 0.0 && bell1(p, 0.9e-9) == 0.0, "B1 support (-inf, h_R)");
-    expect(bell2(p, 0.0, rsum) == 0.0 && bell2(p, 1e-10, rsum) == 0.0, "B2 zero outside the overlap");
-    expect(bell2(p, -rsum * 0.999, rsum) > 100.0, "B2 grows towards h_min");
-    expect(bell3(p, -5e-9, -1.0) == 0.0 && bell3(p, -5e-9, 1.0) == 1.0, "B3 only when separating");
-    expect(bell4(p, 0.75e-9, 1.0) > 0 && bell4(p, 1.2e-9, 1.0) == 0 && bell4(p, 0.0, 1.0) == 0 &&
-               bell4(p, 0.75e-9, -1.0) == 0, "B4 support (0, h0), separating only");
+    expect(bell2(p, p.h_R) == 1.0 && bell2(p, -1e-9) == 1.0 && bell2(p, p.h0) == 0.0 && bell2(p, 0.75e-9) > 0,
+           "B2 support (-inf, h0)");
+    expect(bell3(-0.4 * rsum, rsum) == 0.0 && bell3(-rsum, rsum) == 1.0 && bell3(-0.75 * rsum, rsum) > 0,
+           "B3 support (h_min, h_min/2)");
+    expect(bell4(p, -p.h_D) == 1.0 && bell4(p, 0.0) == 0.0, "B4 support (-inf, 0)");
     for (double x : {0.0, 1.0}) {
       const double e = 1e-7;
       expect(std::fabs(smooth_step(x + e) - smooth_step(x - e)) < 1e-6, "smooth step continuous");
       expect(std::fabs((smooth_step(x + e) - smooth_step(x)) / e) < 1e-6 + 6 * e, "smooth step C1 at ends");
     }
-    // S1 at rest inside the overlap: 2 mu (h_R - h) / t_R^2 (B1 = 1 for h <= 0)
-    const double h = -2e-9;
-    expect(rel_close(steric_terms(p, h, 0.0, mu, rsum).s1, 2 * mu * (p.h_R - h) / (p.t_R * p.t_R), 1e-14), "S1 servo value");
-    expect(steric_terms(p, h, 0.0, mu, rsum).s1 >= 0 && steric_terms(p, h, 10.0, mu, rsum).s1 == 0.0, "S1 never attracts");
-    expect(steric_terms(p, h, -1.0, mu, rsum).s2 > 0, "S2 repels approaching points");
-    expect(steric_terms(p, h, +1.0, mu, rsum).s2 < 0 && steric_terms(p, h, 1.0, mu, rsum).s3 < 0, "S2/S3 brake separation");
+    // S1 at rest just inside h_R: 2 mu e(h) / t_R^2 with e ~ h_R - h; saturated at h_cap deep inside
+    const double h = 0.45e-9;
+    expect(rel_close(steric_terms(p, h, 0.0, mu, rsum).s1, 2 * mu * p.h_R * std::tanh((p.h_R - h) / p.h_R) / (p.t_R * p.t_R) * bell1(p, h), 1e-14),
+           "S1 servo value");
+    const double deep = steric_terms(p, -0.5 * rsum, 0.0, mu, rsum).s1;
+    expect(deep <= 2 * mu * p.h_R / (p.t_R * p.t_R) && deep > 0.99 * 2 * mu * p.h_R / (p.t_R * p.t_R), "S1 saturated at h_cap");
+    StericParams pd = p;
+    pd.s1_damping = true;  // PD servo: the damping term can cancel the push but never attract
+    expect(steric_terms(pd, h, 10.0, mu, rsum).s1 == 0.0 && steric_terms(p, h, 10.0, mu, rsum).s1 > 0, "S1 never attracts");
+    expect(steric_terms(p, h, -1.0, mu, rsum).s2 > 0 && steric_terms(p, h, 1.0, mu, rsum).s2 == 0, "S2 brakes approach only");
+    expect(steric_terms(p, -0.9 * rsum, -1.0, mu, rsum).s3 > 0 && steric_terms(p, -0.9 * rsum, 1.0, mu, rsum).s3 == 0 &&
+               steric_terms(p, -1e-9, -1.0, mu, rsum).s3 == 0, "S3 brakes approach in the deepest half only");
+    expect(steric_terms(p, -1e-8, 1.0, mu, rsum).s4 < 0 && steric_terms(p, 0.25e-9, 1.0, mu, rsum).s4 == 0 &&
+               steric_terms(p, -1e-8, -1.0, mu, rsum).s4 == 0, "S4 brakes separation in the deep steric zone only");
     expect(steric_terms(p, 2e-9, -1.0, mu, rsum).total() == 0.0, "steric zero for h >= h0");
+    // C1 of the bells at the ends of their supports
+    for (double x : {0.0, p.h_R}) {
+      const double e = 1e-15;
+      expect(std::fabs(bell1(p, x + e) - bell1(p, x - e)) < 1e-5, "B1 continuous");
+    }
   }
 
   // ---- points per element: point-pair forces summed along two long parallel cylinders match the

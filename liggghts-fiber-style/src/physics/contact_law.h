@@ -33,7 +33,8 @@ struct ContactLaw {
   // extension and range
   double h0 = 1.0e-9;     // m, DLVO formulas used for h >= h0, splines below
   double h_cut = 50e-9;   // m, interaction range: no force, no ODE work beyond h_cut
-  StericParams steric{1.0e-9, 0.5e-9, 1.0e-9, 1.0e-7};
+  // h0, h_R, h_S, t_R; h_cap 2 nm, h_D 6 nm, h_S4 1 nm (docs/models/contact.md section 3)
+  StericParams steric{1.0e-9, 0.5e-9, 3.0e-8, 1.0e-7, 2.0e-9};
 
   double kappa() const { return inverse_debye_length(ionic_strength, temperature, eps_r); }
   double kT_e() const { return constants::kB * temperature / (valency * constants::e); }
@@ -56,6 +57,7 @@ struct PairLaw {
   const ContactLaw *law = nullptr;
   double r1 = 0, r2 = 0, rsum = 0;
   double mu = 0;  // reduced mass, kg
+  double scale = 1.0;  // weight of the pair (1: mutual closest points, 1/2: one-sided; see contact.md)
   ElectrostaticParams es{};
   double Y1 = 0, Y2 = 0;
   Spline spl_vdw{}, spl_es{};
@@ -68,6 +70,7 @@ struct PairLaw {
     r2 = radius2;
     rsum = std::isinf(r2) ? r1 : r1 + r2;  // steric h_min = -rsum (plane: the point's own radius)
     mu = 1.0 / (inv_m1 + inv_m2);
+    scale = 1.0;
     es = {L.eps_r * constants::eps0, L.kT_e(), L.kappa()};
     Y1 = Y1_;
     Y2 = Y2_;
@@ -101,7 +104,7 @@ struct PairLaw {
     if (law->terms & kVdw) F += vdw(h);
     if (law->terms & kEs) F += electrostatic(h);
     if ((law->terms & kSteric) && h < law->h0) F += steric_force(law->steric, h, u, mu, rsum);
-    return F;
+    return scale * F;
   }
 };
 
