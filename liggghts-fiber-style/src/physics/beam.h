@@ -39,6 +39,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "vec3.h"
+
 namespace fiberform::physics::beam {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -46,20 +48,14 @@ constexpr double kPi = 3.14159265358979323846;
 // ------------------------------------------------------------------------------------------
 // small vector / quaternion algebra
 // ------------------------------------------------------------------------------------------
-struct Vec3 {
-  double x = 0, y = 0, z = 0;
-  double &operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
-  double operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
-};
-inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-inline Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-inline Vec3 operator*(double s, Vec3 a) { return {s * a.x, s * a.y, s * a.z}; }
-inline double dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-inline Vec3 cross(Vec3 a, Vec3 b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
-inline double norm(Vec3 a) { return std::sqrt(dot(a, a)); }
-inline Vec3 hadamard(Vec3 a, Vec3 b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
+using physics::Vec3;
+using physics::cross;
+using physics::dot;
+using physics::hadamard;
+using physics::norm;
+using physics::operator+;
+using physics::operator-;
+using physics::operator*;
 
 struct Quat {
   double w = 1, x = 0, y = 0, z = 0;

@@ -7,19 +7,10 @@
 
 #include <cmath>
 
+#include "vec3.h"
+
 namespace fiberform::physics {
 
-struct Vec3 {
-  double x, y, z;
-};
-inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-inline Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-inline Vec3 operator*(double s, Vec3 a) { return {s * a.x, s * a.y, s * a.z}; }
-inline double dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-inline Vec3 cross(Vec3 a, Vec3 b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
-inline double norm(Vec3 a) { return std::sqrt(dot(a, a)); }
 
 inline double point_fraction(int k, int n) { return (k + 0.5) / n; }
 inline Vec3 lerp(Vec3 a, Vec3 b, double s) { return a + s * (b - a); }
