@@ -98,7 +98,7 @@ def test_stage_without_fiberdem_fails_with_status_1(
     tmp_path: Path, repo_root: Path, fiberform_cmd: list[str]
 ) -> None:
     scene = tmp_path / "demo.yaml"
-    scene.write_text((repo_root / "scenes" / "demo.yaml").read_text())
+    scene.write_text((repo_root / "scenes" / "two-particles.yaml").read_text())
     proc = _cli(
         fiberform_cmd,
         "demo-particles",
@@ -122,12 +122,12 @@ def test_run_executes_enabled_stages_and_writes_report(
     import shutil
     import subprocess
 
-    shutil.copy(repo_root / "scenes" / "demo.yaml", tmp_path / "demo.yaml")
+    shutil.copy(repo_root / "scenes" / "two-particles.yaml", tmp_path / "demo.yaml")
     cmd = [*fiberform_cmd, "run", "demo.yaml", "--build-dir", str(build_dir)]
     first = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    report = (tmp_path / "runs" / "demo" / "report.md").read_text()
+    report = (tmp_path / "runs" / "two-particles" / "report.md").read_text()
     assert "| demo-particles | ran |" in report
-    assert (tmp_path / "runs" / "demo" / "particles" / "particles.h5").is_file()
+    assert (tmp_path / "runs" / "two-particles" / "particles" / "particles.h5").is_file()
     second = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert second.returncode == 0 and "up to date" in second.stdout

@@ -242,7 +242,7 @@ def test_good_scene_passes_and_writes_nothing(
 
 def test_shipped_demo_scene_is_valid(repo_root: Path, fiberform_cmd: list[str]) -> None:
     proc = subprocess.run(
-        [*fiberform_cmd, "check", str(repo_root / "scenes" / "demo.yaml")],
+        [*fiberform_cmd, "check", str(repo_root / "scenes" / "two-particles.yaml")],
         capture_output=True,
         text=True,
     )

@@ -16,6 +16,8 @@
 #include "fix_fiber_dlvo_step.h"
 #include "fix_wall_fiber_dlvo.h"
 #include "fix_fiber_beam.h"
+#include "fix_fiber_drag.h"
+#include "fix_fiber_yarns.h"
 
 namespace fiberform {
 namespace {
@@ -45,6 +47,12 @@ const StyleEntry kStyles[] = {
     {StyleKind::Fix, "fiber/beam",
      "flexible fibers: geometrically exact beam chains (thesis eq. 2.13), integrates its nodes",
      nullptr, &make_fix<LAMMPS_NS::FixFiberBeam>, nullptr},
+    {StyleKind::Fix, "fiber/drag",
+     "fluid drag (thesis eq. 2.14-2.16), gravity and buoyancy on fiber/beam elements; uniform or grid flow",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberDrag>, nullptr},
+    {StyleKind::Fix, "fiber/yarns",
+     "static yarn chains and planes (fiber/dlvo law, sub-stepped) for fiber/beam nodes; removes fibers",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberYarns>, nullptr},
 };
 
 const char *kind_name(StyleKind k) {

@@ -31,6 +31,8 @@ __all__ = [
     "Token",
     "dump_format",
     "file_token",
+    "fix_ref",
+    "quit_if_at_least",
     "fmt_float",
     "fmt_ident",
     "fmt_int",
@@ -138,6 +140,26 @@ def file_token(name: str) -> Token:
     if not isinstance(name, str) or _FILE_NAME.fullmatch(name) is None:
         raise InputFormatError(f"refusing file name {name!r}")
     return Token(name, _TOKEN_KEY)
+
+
+def fix_ref(fix_id: str, index: int | None = None) -> Token:
+    """A reference to a fix's global value, ``f_ID`` or ``f_ID[n]`` (thermo, variables)."""
+    text = "f_" + fmt_ident(fix_id)
+    if index is not None:
+        if isinstance(index, bool) or not isinstance(index, int) or not 1 <= index <= 99:
+            raise InputFormatError(f"refusing fix vector index {index!r}")
+        text += f"[{index}]"
+    return Token(text, _TOKEN_KEY)
+
+
+def quit_if_at_least(variable: str, threshold: int | float,
+                     marker: str = "FIBERFORM_QUIT") -> tuple[Token, ...]:
+    """Arguments of ``if "${variable} >= threshold" then "print MARKER" quit``: stop the input
+    when a variable (an identifier) reaches a number (settle criteria). LIGGGHTS 3.8's ``quit``
+    exits with status 1, so the marker line tells a deliberate stop from a failure."""
+    cond = '"${' + fmt_ident(variable) + "} >= " + fmt_value(threshold) + '"'
+    return (Token(cond, _TOKEN_KEY), Token("then", _TOKEN_KEY),
+            Token('"print ' + fmt_ident(marker) + '"', _TOKEN_KEY), Token("quit", _TOKEN_KEY))
 
 
 def _arg(value: object) -> str:

@@ -48,6 +48,7 @@ __all__ = [
     "DomainSection",
     "FabricSection",
     "FlowSection",
+    "LaydownSection",
     "FibersSection",
     "FluidSection",
     "RunSection",
@@ -358,6 +359,14 @@ class FiberGenerationSection(_Section):
     max_attempts: int = quantity(
         "Placement attempts per fiber before giving up", "1", default=1000, ge=1, le=10**7
     )
+    placement_lo_m: list[Coordinate] | None = _element_range(
+        "Lower corner of the box fibers are placed in (absent: domain.lo_m)", "m",
+        "-10 <= x <= 10", default=None,
+    )
+    placement_hi_m: list[Coordinate] | None = _element_range(
+        "Upper corner of the placement box (absent: domain.hi_m)", "m", "-10 <= x <= 10",
+        default=None,
+    )
 
     @model_validator(mode="after")
     def _check(self) -> FiberGenerationSection:
@@ -622,6 +631,67 @@ class FlowSection(_Section):
     )  # fmt: skip
 
 
+class LaydownSection(_Section):
+    """Lay-down of the generated fibers on the fabric in the frozen flow (stage ``laydown``)."""
+
+    timestep_s: float = quantity("Fiber (DEM) time step", "s", default=1.0e-7, gt=0.0, le=1e-3)
+    max_time_s: float = quantity(
+        "Longest simulated time (the run ends earlier once settled)", "s", default=0.02,
+        gt=0.0, le=10.0,
+    )  # fmt: skip
+    check_interval_s: float = quantity(
+        "Simulated time between settle checks and sheet snapshots", "s", default=2.0e-4,
+        gt=0.0, le=1.0,
+    )  # fmt: skip
+    settle_speed_m_s: float = quantity(
+        "Settled when the largest node speed stays below this", "m/s", default=2.0e-3,
+        gt=0.0, le=10.0,
+    )  # fmt: skip
+    settle_checks: int = quantity(
+        "Consecutive checks below settle_speed_m_s that end the run", "1", default=5, ge=1,
+        le=10000,
+    )  # fmt: skip
+    removal_height_m: float | None = quantity(
+        "Fibers with a node below this height are removed (absent: fabric lower side - 50 um)",
+        "m", default=None, ge=-10.0, le=10.0,
+    )  # fmt: skip
+    walls: Literal["fiber_yarns", "wall_fiber_dlvo"] = choice(
+        "The four vertical side planes: fiber_yarns (planes of fix fiber/yarns, fiber/dlvo law, "
+        "sub-stepped) or wall_fiber_dlvo (fix wall/fiber/dlvo of the contact styles)",
+        default="fiber_yarns",
+    )
+    terms: list[ContactTerm] = choice(
+        "Terms of the fiber/dlvo law against yarns and walls", default=["steric"]
+    )
+    contact_substeps: int = quantity(
+        "Velocity-Verlet sub-steps per step of each node-yarn contact", "1", default=100, ge=1,
+        le=100000,
+    )  # fmt: skip
+    inertia_scale: float = quantity(
+        "fix fiber/beam inertia_scale (rotary inertia factor; speed option)", "1",
+        default=1.0e4, gt=0.0, le=1e8,
+    )  # fmt: skip
+    stiffness_scale: float = quantity(
+        "fix fiber/beam stiffness_scale (EA, GA factor; speed option)", "1", default=0.01,
+        gt=0.0, le=1.0,
+    )  # fmt: skip
+    damping_time_s: float = quantity(
+        "fix fiber/beam Kelvin-Voigt damping time", "s", default=0.0, ge=0.0, le=1.0
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> LaydownSection:
+        if self.timestep_s > self.check_interval_s:
+            raise scene_problem("check_interval_s", "must be at least timestep_s",
+                                self.check_interval_s)
+        if self.check_interval_s > self.max_time_s:
+            raise scene_problem("check_interval_s", "must not exceed max_time_s",
+                                self.check_interval_s)
+        if not self.terms:
+            raise scene_problem("terms", "needs at least one of vdw, es, steric", [])
+        return self
+
+
 class Scene(_Section):
     """A complete scene. Only ``name`` and ``run`` are required; other sections are optional."""
 
@@ -657,6 +727,9 @@ class Scene(_Section):
     )
     fabric: FabricSection | None = Field(default=None, description="Forming fabric")
     flow: FlowSection | None = Field(default=None, description="Flow through the bare fabric")
+    laydown: LaydownSection | None = Field(
+        default=None, description="Lay-down of the fibers on the fabric (stage laydown)"
+    )
 
     @property
     def output_path(self) -> Path:
@@ -670,7 +743,7 @@ class Scene(_Section):
 
 SECTIONS: tuple[str, ...] = (
     "domain", "fluid", "fibers", "contact", "run", "demo_particles", "fabric", "flow",
-    "fiber_generation",
+    "fiber_generation", "laydown",
 )
 
 

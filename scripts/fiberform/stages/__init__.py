@@ -12,11 +12,13 @@ from .fabric import FabricStage
 from .flow import FlowStage
 from .particles import DemoParticles
 from .generate import Generate
+from .laydown import Laydown
 
 __all__ = ["STAGES", "Outcome", "Stage", "StageContext", "stage"]
 
 #: Every stage by CLI name, in pipeline order.
-STAGES: dict[str, Stage] = {s.name: s for s in (DemoParticles(), Generate(), FabricStage(), FlowStage())}
+STAGES: dict[str, Stage] = {s.name: s for s in (DemoParticles(), Generate(), FabricStage(), FlowStage(),
+                                               Laydown())}
 
 
 def stage(name: str) -> Stage:

@@ -496,7 +496,9 @@ class Generate(Stage):
             aspect = f.thickness_m / f.width_m
         rng = np.random.default_rng(scene.seed)
         fibers = generate_fibers(
-            rng=rng, box_lo=np.array(scene.domain.lo_m), box_hi=np.array(scene.domain.hi_m),
+            rng=rng,
+            box_lo=np.array(g.placement_lo_m if g is not None and g.placement_lo_m else scene.domain.lo_m),
+            box_hi=np.array(g.placement_hi_m if g is not None and g.placement_hi_m else scene.domain.hi_m),
             density=f.density_kg_m3, length=length, width=width, curvature=curv,
             segments=f.segments,
             element_length_m=g.element_length_m if g is not None else None,

@@ -1,0 +1,390 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fix fiber/yarns: see fix_fiber_yarns.h and docs/styles/fix_fiber_yarns.md. */
+#include "fix_fiber_yarns.h"
+
+#include <mpi.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include "atom.h"
+#include "atom_vec.h"
+#include "comm.h"
+#include "error.h"
+#include "fix_fiber_beam.h"
+#include "modify.h"
+#include "update.h"
+
+using namespace LAMMPS_NS;
+using namespace FixConst;
+namespace phys = fiberform::physics;
+
+namespace {
+
+char g_errmsg[1024];
+const char *errtext(const std::string &s) {
+  std::snprintf(g_errmsg, sizeof g_errmsg, "%s", s.c_str());
+  return g_errmsg;
+}
+
+double number(Error *error, const std::string &keyword, const char *text) {
+  char *end = nullptr;
+  const double v = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(v))
+    error->all(FLERR, errtext("fix fiber/yarns: " + keyword + ": '" + text + "' is not a finite number"));
+  return v;
+}
+
+// closest point of segment a-b to p: returns the parameter in [0, 1]
+double closest_param(const std::array<double, 3> &a, const std::array<double, 3> &b, const double *p) {
+  double d[3], w[3];
+  for (int k = 0; k < 3; ++k) {
+    d[k] = b[k] - a[k];
+    w[k] = p[k] - a[k];
+  }
+  const double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  if (dd <= 0.0) return 0.0;
+  const double t = (w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd;
+  return t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+}
+
+}  // namespace
+
+FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
+  vector_flag = 1;
+  size_vector = 8;
+  global_freq = 1;
+  extvector = 0;
+  law_.terms = phys::kSteric;
+  int iarg = 3;
+  while (iarg < narg) {
+    const std::string kw = arg[iarg];
+    auto need = [&](int n) {
+      if (iarg + n >= narg)
+        error->all(FLERR, errtext("fix fiber/yarns: " + kw + " needs " + std::to_string(n) + " value(s)"));
+    };
+    auto val = [&](int k) { return number(error, kw, arg[iarg + k]); };
+    if (kw == "yarns") {
+      need(1);
+      read_yarns(arg[iarg + 1]);
+      iarg += 2;
+    } else if (kw == "plane") {
+      need(6);
+      Plane pl{{val(1), val(2), val(3)}, {val(4), val(5), val(6)}};
+      const double nn = std::sqrt(pl.n[0] * pl.n[0] + pl.n[1] * pl.n[1] + pl.n[2] * pl.n[2]);
+      if (!(nn > 0.0)) error->all(FLERR, "fix fiber/yarns: plane normal must not be zero");
+      for (double &c : pl.n) c /= nn;
+      planes_.push_back(pl);
+      iarg += 7;
+    } else if (kw == "remove_below") {
+      need(1);
+      remove_ = true;
+      remove_z_ = val(1);
+      iarg += 2;
+    } else if (kw == "remove_every") {
+      need(1);
+      remove_every_ = static_cast<int>(val(1));
+      if (remove_every_ < 1) error->all(FLERR, "fix fiber/yarns: remove_every must be >= 1");
+      iarg += 2;
+    } else if (kw == "settle") {
+      need(2);
+      settle_speed_ = val(1);
+      nevery = static_cast<int>(val(2));
+      if (!(settle_speed_ > 0.0) || nevery < 1) error->all(FLERR, "fix fiber/yarns: settle needs V > 0 and M >= 1");
+      iarg += 3;
+    } else if (kw == "substeps") {
+      need(1);
+      substeps_ = static_cast<int>(val(1));
+      if (substeps_ < 1) error->all(FLERR, "fix fiber/yarns: substeps must be >= 1");
+      iarg += 2;
+    } else if (kw == "terms") {
+      need(1);
+      unsigned t = 0;
+      std::stringstream ss(arg[iarg + 1]);
+      std::string item;
+      while (std::getline(ss, item, ',')) {
+        if (item == "vdw") t |= phys::kVdw;
+        else if (item == "es") t |= phys::kEs;
+        else if (item == "steric") t |= phys::kSteric;
+        else if (item != "none") error->all(FLERR, errtext("fix fiber/yarns: terms: unknown term '" + item + "'"));
+      }
+      law_.terms = t;
+      iarg += 2;
+    } else if (kw == "hamaker") { need(1); law_.hamaker = val(1); iarg += 2; }
+    else if (kw == "psi") { need(1); law_.psi_d = val(1); iarg += 2; }
+    else if (kw == "ionic_strength") { need(1); law_.ionic_strength = val(1); iarg += 2; }
+    else if (kw == "temperature") { need(1); law_.temperature = val(1); iarg += 2; }
+    else if (kw == "eps_r") { need(1); law_.eps_r = val(1); iarg += 2; }
+    else if (kw == "h0") { need(1); law_.h0 = law_.steric.h0 = val(1); iarg += 2; }
+    else if (kw == "h_cut") { need(1); law_.h_cut = val(1); iarg += 2; }
+    else if (kw == "h_R") { need(1); law_.steric.h_R = val(1); iarg += 2; }
+    else if (kw == "h_S") { need(1); law_.steric.h_S = val(1); iarg += 2; }
+    else if (kw == "t_R") { need(1); law_.steric.t_R = val(1); iarg += 2; }
+    else {
+      error->all(FLERR, errtext("fix fiber/yarns: unknown keyword '" + kw + "'"));
+    }
+  }
+  if (!(law_.steric.h_R > 0.0 && law_.steric.h_R < law_.h0))
+    error->all(FLERR, "fix fiber/yarns: need 0 < h_R < h0");
+  if (!(law_.h_cut > law_.h0)) error->all(FLERR, "fix fiber/yarns: need h_cut > h0");
+  if (remove_) {
+    force_reneighbor = 1;
+    next_reneighbor = (update->ntimestep / remove_every_) * remove_every_ + remove_every_;
+  }
+  build_bins();
+}
+
+void FixFiberYarns::read_yarns(const char *path) {
+  std::ifstream in(path);
+  if (!in) error->all(FLERR, errtext(std::string("fix fiber/yarns: cannot open yarns file ") + path));
+  std::string line;
+  int prev_yarn = -1;
+  std::array<double, 3> prev{0, 0, 0};
+  double prev_r = 0.0;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream ls(line);
+    int yarn;
+    std::array<double, 3> p;
+    double r;
+    if (!(ls >> yarn)) continue;
+    if (!(ls >> p[0] >> p[1] >> p[2] >> r) || !(r > 0.0))
+      error->all(FLERR, errtext(std::string(path) + ":" + std::to_string(lineno) +
+                                ": expected 'yarn-index x y z radius' with radius > 0"));
+    if (yarn == prev_yarn) segs_.push_back({prev, p, 0.5 * (prev_r + r), yarn});
+    prev_yarn = yarn;
+    prev = p;
+    prev_r = r;
+  }
+  if (segs_.empty()) error->all(FLERR, errtext(std::string("fix fiber/yarns: no yarn segments in ") + path));
+}
+
+// Bins of segment capsules (radius + reach), so that a node looks at the few segments near it.
+void FixFiberYarns::build_bins() {
+  bins_.clear();
+  if (segs_.empty()) return;
+  double rmax = 0.0, lmax = 0.0;
+  bin_lo_[0] = bin_lo_[1] = bin_lo_[2] = std::numeric_limits<double>::max();
+  for (const Segment &s : segs_) {
+    rmax = std::max(rmax, s.radius);
+    double l2 = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      l2 += (s.b[k] - s.a[k]) * (s.b[k] - s.a[k]);
+      bin_lo_[k] = std::min(bin_lo_[k], std::min(s.a[k], s.b[k]));
+    }
+    lmax = std::max(lmax, std::sqrt(l2));
+  }
+  bin_size_ = std::max(rmax, lmax);
+  // reach beyond the yarn surface covered by the bins: a fiber radius of up to the yarn radius
+  const double reach = rmax;
+  for (int k = 0; k < 3; ++k) bin_lo_[k] -= 2.0 * bin_size_;
+  for (int id = 0; id < static_cast<int>(segs_.size()); ++id) {
+    const Segment &s = segs_[id];
+    int lo[3], hi[3];
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = static_cast<int>(std::floor((std::min(s.a[k], s.b[k]) - s.radius - reach - bin_lo_[k]) / bin_size_));
+      hi[k] = static_cast<int>(std::floor((std::max(s.a[k], s.b[k]) + s.radius + reach - bin_lo_[k]) / bin_size_));
+    }
+    for (int a = lo[0]; a <= hi[0]; ++a)
+      for (int b = lo[1]; b <= hi[1]; ++b)
+        for (int c = lo[2]; c <= hi[2]; ++c) bins_[bin_key(a, b, c)].push_back(id);
+  }
+}
+
+int FixFiberYarns::setmask() { return POST_FORCE | PRE_EXCHANGE | END_OF_STEP; }
+
+void FixFiberYarns::end_of_step() {
+  if (!(settle_speed_ > 0.0)) return;
+  double vmax = 0.0;
+  for (int i = 0; i < atom->nlocal; ++i) {
+    if (!(atom->mask[i] & groupbit)) continue;
+    const double *v = atom->v[i];
+    vmax = std::max(vmax, v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  }
+  MPI_Allreduce(&vmax, &max_speed_, 1, MPI_DOUBLE, MPI_MAX, world);
+  max_speed_ = std::sqrt(max_speed_);
+  settled_checks_ = max_speed_ < settle_speed_ ? settled_checks_ + 1.0 : 0.0;
+}
+
+void FixFiberYarns::init() {
+  beam_ = FixFiberBeam::find(lmp);
+  if (!beam_) error->all(FLERR, "fix fiber/yarns: needs a fix fiber/beam (fiber topology and sections)");
+  if (!atom->rmass_flag) error->all(FLERR, "fix fiber/yarns: needs per-atom mass (atom_style sphere)");
+  // the contact force uses the other forces on the node: they must be summed before this fix
+  bool after = false;
+  for (int k = 0; k < modify->nfix; ++k) {
+    if (modify->fix[k] == this) after = true;
+    else if (after && (modify->fmask[k] & POST_FORCE) && comm->me == 0)
+      error->warning(FLERR, "fix fiber/yarns: define it after the fixes that add forces (its contact "
+                            "sub-integration uses the node's other forces)");
+  }
+}
+
+void FixFiberYarns::setup(int vflag) { post_force(vflag); }
+
+/* One node against a static body: 1-D normal motion over the step, velocity-Verlet sub-steps, the
+   other forces on the node held constant; the average contact force is applied. */
+void FixFiberYarns::apply_contact(int i, const double n[3], double h, double r1, double r2, double &gap_min) {
+  double *v = atom->v[i], *f = atom->f[i];
+  const double m = atom->rmass[i];
+  const double dt = update->dt;
+  const double u0 = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+  if (h + std::min(0.0, u0) * dt - std::fabs(u0) * dt >= law_.h_cut && h >= law_.h_cut) return;
+  const double a_ext = (f[0] * n[0] + f[1] * n[1] + f[2] * n[2]) / m;
+  phys::PairLaw pl;
+  pl.setup(law_, r1, r2, 1.0 / m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
+  const double hs = dt / substeps_;
+  double hh = h, u = u0;
+  double acc = a_ext + pl.force(hh, u) / m;
+  for (int s = 0; s < substeps_; ++s) {
+    u += 0.5 * hs * acc;
+    hh += hs * u;
+    acc = a_ext + pl.force(hh, u) / m;  // force at the new gap with the half-step rate
+    u += 0.5 * hs * acc;
+  }
+  const double fc = m * ((u - u0) / dt - a_ext);  // average contact force over the step
+  for (int k = 0; k < 3; ++k) f[k] += fc * n[k];
+  gap_min = std::min(gap_min, h);
+}
+
+void FixFiberYarns::post_force(int) {
+  const int nlocal = atom->nlocal;
+  int *mask = atom->mask;
+  double **x = atom->x;
+  local_[0] = local_[1] = 0.0;
+  double gap_min = std::numeric_limits<double>::max();
+  for (int i = 0; i < nlocal; ++i) {
+    if (!(mask[i] & groupbit) || !beam_->is_node(i)) continue;
+    double rr[4];
+    beam_->section_radii(i, rr);
+    const double r1 = std::max(rr[0], rr[1]);
+    // planes
+    for (const Plane &pl : planes_) {
+      const double dist = (x[i][0] - pl.p[0]) * pl.n[0] + (x[i][1] - pl.p[1]) * pl.n[1] + (x[i][2] - pl.p[2]) * pl.n[2];
+      const double h = dist - r1;
+      if (h < law_.h_cut + 1e-3 * r1) {
+        local_[1] += 1.0;
+        apply_contact(i, pl.n.data(), h, r1, INFINITY, gap_min);
+      }
+    }
+    if (segs_.empty()) continue;
+    // yarns: the closest segment of each yarn near the node
+    const int bx = static_cast<int>(std::floor((x[i][0] - bin_lo_[0]) / bin_size_));
+    const int by = static_cast<int>(std::floor((x[i][1] - bin_lo_[1]) / bin_size_));
+    const int bz = static_cast<int>(std::floor((x[i][2] - bin_lo_[2]) / bin_size_));
+    auto it = bins_.find(bin_key(bx, by, bz));
+    if (it == bins_.end()) continue;
+    // per yarn: best (smallest h) segment
+    int best_yarn[8];
+    double best_h[8], best_n[8][3], best_r[8];
+    int nbest = 0;
+    for (int id : it->second) {
+      const Segment &s = segs_[id];
+      const double t = closest_param(s.a, s.b, x[i]);
+      double d[3];
+      for (int k = 0; k < 3; ++k) d[k] = x[i][k] - (s.a[k] + t * (s.b[k] - s.a[k]));
+      const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      const double h = dist - s.radius - r1;
+      if (h >= law_.h_cut + 1e-3 * r1 || dist <= 0.0) continue;
+      int slot = -1;
+      for (int b = 0; b < nbest; ++b)
+        if (best_yarn[b] == s.yarn) slot = b;
+      if (slot < 0) {
+        if (nbest == 8) continue;
+        slot = nbest++;
+        best_yarn[slot] = s.yarn;
+        best_h[slot] = std::numeric_limits<double>::max();
+      }
+      if (h < best_h[slot]) {
+        best_h[slot] = h;
+        best_r[slot] = s.radius;
+        for (int k = 0; k < 3; ++k) best_n[slot][k] = d[k] / dist;
+      }
+    }
+    for (int b = 0; b < nbest; ++b) {
+      local_[0] += 1.0;
+      apply_contact(i, best_n[b], best_h[b], r1, best_r[b], gap_min);
+    }
+  }
+  local_[2] = -gap_min;
+  sums_valid_ = false;
+}
+
+/* Removal of whole fibers (all nodes) once any node is below remove_z_; as LAMMPS fix evaporate:
+   on a forced re-neighbouring step, before atoms migrate. */
+void FixFiberYarns::pre_exchange() {
+  if (!remove_ || update->ntimestep < next_reneighbor) return;
+  next_reneighbor = update->ntimestep + remove_every_;
+  int nlocal = atom->nlocal;
+  double **x = atom->x;
+  std::vector<int> mine;
+  for (int i = 0; i < nlocal; ++i)
+    if ((atom->mask[i] & groupbit) && beam_->is_node(i) && x[i][2] < remove_z_) mine.push_back(beam_->fiber_id(i));
+  std::sort(mine.begin(), mine.end());
+  mine.erase(std::unique(mine.begin(), mine.end()), mine.end());
+  int nmine = static_cast<int>(mine.size());
+  const int nprocs = comm->nprocs;
+  std::vector<int> counts(nprocs), displs(nprocs);
+  MPI_Allgather(&nmine, 1, MPI_INT, counts.data(), 1, MPI_INT, world);
+  int total = 0;
+  for (int p = 0; p < nprocs; ++p) {
+    displs[p] = total;
+    total += counts[p];
+  }
+  if (total == 0) return;
+  std::vector<int> all(total);
+  MPI_Allgatherv(mine.data(), nmine, MPI_INT, all.data(), counts.data(), displs.data(), MPI_INT, world);
+  std::set<int> gone(all.begin(), all.end());
+  double mass = 0.0, nodes = 0.0;
+  for (int i = nlocal - 1; i >= 0; --i) {
+    if (!beam_->is_node(i) || !gone.count(beam_->fiber_id(i))) continue;
+    mass += atom->rmass[i];
+    nodes += 1.0;
+    atom->avec->copy(nlocal - 1, i, 1);
+    --nlocal;
+  }
+  atom->nlocal = nlocal;
+  double loc[2] = {mass, nodes}, glob[2];
+  MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_SUM, world);
+  removed_mass_ += glob[0];
+  removed_nodes_ += glob[1];
+  removed_fibers_ += static_cast<double>(gone.size());
+  atom->natoms -= static_cast<bigint>(glob[1] + 0.5);
+  if (atom->map_style) {
+    atom->nghost = 0;
+    atom->map_init();
+    atom->map_set();
+  }
+  if (comm->me == 0) {
+    std::string msg = "fix fiber/yarns: step " + std::to_string(update->ntimestep) + " removed fiber(s)";
+    for (int id : gone) msg += " " + std::to_string(id);
+    msg += "\n";
+    if (screen) std::fputs(msg.c_str(), screen);
+    if (logfile) std::fputs(msg.c_str(), logfile);
+  }
+}
+
+double FixFiberYarns::compute_vector(int n) {
+  if (n == 0) return removed_fibers_;
+  if (n == 1) return removed_mass_;
+  if (n == 2) return removed_nodes_;
+  if (n == 6) return settled_checks_;
+  if (n == 7) return max_speed_;
+  if (!sums_valid_) {
+    MPI_Allreduce(local_, sums_, 2, MPI_DOUBLE, MPI_SUM, world);
+    MPI_Allreduce(&local_[2], &sums_[2], 1, MPI_DOUBLE, MPI_MAX, world);
+    sums_valid_ = true;
+  }
+  if (n == 5) return -sums_[2];
+  return sums_[n - 3];
+}

@@ -1,0 +1,68 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fix fiber/yarns: static bodies for fix fiber/beam fibers during lay-down (Kettil 2016 sec. 3.1):
+   fabric yarns as chains of cylinders (polylines with a radius) and planes, both of infinite mass,
+   acting on every fiber node through the fiber/dlvo contact law (physics/contact_law.h, read-only),
+   sub-integrated over the step; and removal of whole fibers that reach a height (the bottom).
+
+   Syntax (full page: docs/styles/fix_fiber_yarns.md):
+     fix ID group fiber/yarns [yarns FILE] [plane px py pz nx ny nz] ... [keyword value ...]
+       remove_below z      remove every fiber any node of which is below z (m)
+       remove_every N      check for removal every N steps (default 100)
+       settle V M          every M steps: count consecutive checks with max node speed < V (m/s)
+       substeps N          velocity-Verlet sub-steps per step for each contact (default 100)
+       terms LIST          comma list of vdw, es, steric (default steric)
+       hamaker A | psi V | ionic_strength I | temperature T | eps_r e | h0 h | h_cut h |
+       h_R h | h_S h | t_R t      as in pair_style fiber/dlvo */
+#ifndef LMP_FIX_FIBER_YARNS_H
+#define LMP_FIX_FIBER_YARNS_H
+
+#include <array>
+#include <unordered_map>
+#include <vector>
+
+#include "fix.h"
+#include "physics/contact_law.h"
+
+namespace LAMMPS_NS {
+
+class FixFiberYarns : public Fix {
+ public:
+  FixFiberYarns(class LAMMPS *lmp, int narg, char **arg);
+  ~FixFiberYarns() override = default;
+  int setmask() override;
+  void init() override;
+  void setup(int vflag) override;
+  void post_force(int vflag) override;
+  void pre_exchange() override;
+  void end_of_step() override;
+  double compute_vector(int n) override;
+
+ private:
+  struct Segment { std::array<double, 3> a, b; double radius; int yarn; };
+  struct Plane { std::array<double, 3> p, n; };
+  void read_yarns(const char *path);
+  void build_bins();
+  void apply_contact(int i, const double n[3], double h, double r1, double r2, double &gap_min);
+  long bin_key(int ix, int iy, int iz) const { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
+
+  std::vector<Segment> segs_;
+  std::vector<Plane> planes_;
+  std::unordered_map<long, std::vector<int>> bins_;
+  double bin_size_ = 0.0, bin_lo_[3] = {0, 0, 0};
+  fiberform::physics::ContactLaw law_;
+  int substeps_ = 100;
+  bool remove_ = false;
+  double remove_z_ = 0.0;
+  int remove_every_ = 100;
+  class FixFiberBeam *beam_ = nullptr;
+  double settle_speed_ = -1.0;  // < 0: no settle check
+  double settled_checks_ = 0, max_speed_ = 0;
+  double removed_fibers_ = 0, removed_mass_ = 0, removed_nodes_ = 0;
+  double local_[3] = {0, 0, 0};  // yarn contacts, plane contacts, -min gap
+  double sums_[3] = {0, 0, 0};
+  bool sums_valid_ = false;
+};
+
+}  // namespace LAMMPS_NS
+
+#endif
