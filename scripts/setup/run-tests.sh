@@ -25,7 +25,7 @@ echo "== pytest =="
 marker=()
 if [[ "$mode" != "--validate" ]]; then marker=(-m "not validation"); fi
 "$root/.venv/bin/python" -m pytest tests "${marker[@]}" -p no:cacheprovider \
-  --junitxml="$logdir/pytest.xml" -q -rfE 2>&1 | tee "$logdir/pytest.log"
+  --junitxml="$logdir/pytest.xml" -q -rfE --durations=10 2>&1 | tee "$logdir/pytest.log"
 py_rc=${PIPESTATUS[0]}
 read -r p_passed p_failed p_skipped < <("$root/.venv/bin/python" - "$logdir/pytest.xml" <<'PY'
 import sys, xml.etree.ElementTree as ET
