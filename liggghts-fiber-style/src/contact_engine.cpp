@@ -224,8 +224,43 @@ bool ContactEngine::mutual_closest(const Element &A, int k, const Element &B, in
   return true;
 }
 
+void ContactEngine::cache_clear() {
+  cache_used_ = 0;
+  if (++cache_stamp_ == 0) {  // stamp wrapped: invalidate explicitly
+    for (CacheSlot &c : cache_) c.stamp = 0;
+    cache_stamp_ = 1;
+  }
+}
+
+const PairResult *ContactEngine::cache_find(const Key &k) const {
+  if (cache_.empty()) return nullptr;
+  const std::size_t mask = cache_.size() - 1;
+  for (std::size_t i = KeyHash()(k) & mask;; i = (i + 1) & mask) {
+    const CacheSlot &c = cache_[i];
+    if (c.stamp != cache_stamp_) return nullptr;
+    if (c.key == k) return &c.r;
+  }
+}
+
+void ContactEngine::cache_insert(const Key &k, const PairResult &r) {
+  if (2 * (cache_used_ + 1) > cache_.size()) {  // keep the load <= 1/2; grow (rare) and rehash
+    std::vector<CacheSlot> old;
+    old.swap(cache_);
+    cache_.assign(old.empty() ? 1024 : 2 * old.size(), CacheSlot{});
+    const unsigned stamp = cache_stamp_;
+    cache_used_ = 0;
+    for (const CacheSlot &c : old)
+      if (c.stamp == stamp) cache_insert(c.key, c.r);
+  }
+  const std::size_t mask = cache_.size() - 1;
+  std::size_t i = KeyHash()(k) & mask;
+  while (cache_[i].stamp == cache_stamp_) i = (i + 1) & mask;
+  cache_[i] = CacheSlot{k, r, cache_stamp_};
+  ++cache_used_;
+}
+
 void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const NodeData &nd, const NodeSinks &out) {
-  cache_.clear();
+  cache_clear();
   const physics::ContactLaw &L = cfg.law;
   // effective potentials depend on the representative radius only: cache the last one
   double y_r = -1.0, y_val = 0.0;
@@ -334,9 +369,8 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
       const bool swap = idB < idA;
       const Key key{swap ? idB : idA, swap ? idA : idB};
       PairResult r;
-      auto it = cache_.find(key);
-      if (it != cache_.end()) {
-        r = it->second;
+      if (const PairResult *hit = cache_find(key)) {
+        r = *hit;
         ++stats.cache_hits;
       } else {
         PairGeometry gg = g;
@@ -344,7 +378,7 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
         ++stats.solves;
         stats.rhs_evals += r.rhs_evals;
         if (!r.ok) ++stats.failures;
-        cache_.emplace(key, r);
+        cache_insert(key, r);
       }
       apply(A, cd.k, r_off, swap ? r.fpos2 : r.fpos1, swap ? r.fvel2 : r.fvel1, out, true);
     }

@@ -15,7 +15,6 @@
 #define FIBERFORM_CONTACT_ENGINE_H
 
 #include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 #include "contact_integrator.h"
@@ -130,7 +129,20 @@ class ContactEngine : protected LAMMPS_NS::Pointers {
   struct KeyHash {
     std::size_t operator()(const Key &k) const { return std::hash<std::uint64_t>()(k.a * 1000003u ^ k.b); }
   };
-  std::unordered_map<Key, PairResult, KeyHash> cache_;
+  // Per-step cache of mutual-pair solves: open addressing in a vector that is reused from step to
+  // step (entries invalidated by a step stamp), so no allocation happens per contact; it only grows
+  // (doubling) when a step has more mutual pairs than any step before.
+  struct CacheSlot {
+    Key key;
+    PairResult r;
+    unsigned stamp = 0;
+  };
+  std::vector<CacheSlot> cache_;
+  unsigned cache_stamp_ = 0;
+  std::size_t cache_used_ = 0;
+  void cache_clear();
+  const PairResult *cache_find(const Key &k) const;
+  void cache_insert(const Key &k, const PairResult &r);
   struct Candidate {
     int k, mol, elem, q;
     double dist;
