@@ -14,7 +14,7 @@ from fiberform._versions import git_revision
 
 
 def _cli(cmd: list[str], *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*cmd, *args], capture_output=True, text=True, cwd=cwd, timeout=60)
+    return subprocess.run([*cmd, *args], capture_output=True, text=True, errors="replace", cwd=cwd, timeout=60)
 
 
 def test_help_lists_commands(fiberform_cmd: list[str]) -> None:
@@ -124,10 +124,10 @@ def test_run_executes_enabled_stages_and_writes_report(
 
     shutil.copy(repo_root / "scenes" / "two-particles.yaml", tmp_path / "demo.yaml")
     cmd = [*fiberform_cmd, "run", "demo.yaml", "--build-dir", str(build_dir)]
-    first = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    first = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, errors="replace", timeout=300)
     assert first.returncode == 0, first.stderr
     report = (tmp_path / "runs" / "two-particles" / "report.md").read_text()
     assert "| demo-particles | ran |" in report
     assert (tmp_path / "runs" / "two-particles" / "particles" / "particles.h5").is_file()
-    second = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    second = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, errors="replace", timeout=300)
     assert second.returncode == 0 and "up to date" in second.stdout

@@ -171,7 +171,7 @@ def test_stl_import_round_trip(tmp_path: Path) -> None:
 
 def _run_cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "fiberform", *args], cwd=cwd, capture_output=True, text=True,
+        [sys.executable, "-m", "fiberform", *args], cwd=cwd, capture_output=True, text=True, errors="replace",
         timeout=300, check=False,
     )  # fmt: skip
 

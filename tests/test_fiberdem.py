@@ -49,7 +49,7 @@ def _run(workdir: Path, ranks: int, *var: str) -> None:
         cmd += ["-var", var[i], var[i + 1]]
     if ranks > 1:
         cmd = ["mpirun", "-np", str(ranks)] + cmd
-    proc = subprocess.run(cmd, cwd=workdir, env=_env(), capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(cmd, cwd=workdir, env=_env(), capture_output=True, text=True, errors="replace", timeout=120)
     log = workdir / "log.fiberdem"
     tail = log.read_text()[-3000:] if log.exists() else ""
     assert proc.returncode == 0, f"{cmd} failed ({proc.returncode}):\n{proc.stderr}\n{tail}"
@@ -64,7 +64,7 @@ def _final_state(workdir: Path) -> np.ndarray:
 
 
 def test_help_lists_every_registered_style() -> None:
-    out = subprocess.run([str(_fiberdem()), "-h"], env=_env(), capture_output=True, text=True,
+    out = subprocess.run([str(_fiberdem()), "-h"], env=_env(), capture_output=True, text=True, errors="replace",
                          timeout=60, check=True).stdout
     # Every style row of the registrar (the one file listing them) appears in `fiberdem -h`.
     import re
@@ -76,7 +76,7 @@ def test_help_lists_every_registered_style() -> None:
 
 def test_version_names_liggghts() -> None:
     out = subprocess.run([str(_fiberdem()), "--version"], env=_env(), capture_output=True,
-                         text=True, timeout=60, check=True).stdout
+                         text=True, errors="replace", timeout=60, check=True).stdout
     assert "LIGGGHTS" in out and "3.8" in out
 
 
@@ -118,7 +118,7 @@ def test_bad_input_fails_with_liggghts_error(tmp_path: Path) -> None:
     bad.write_text("units si\natom_style sphere\nregion b block 0 1 0 1 0 1\ncreate_box 1 b\n"
                    "pair_style test/harmonic\npair_coeff * * -1\n")
     proc = subprocess.run([str(_fiberdem()), "-in", str(bad), "-log", "none"], cwd=tmp_path,
-                          env=_env(), capture_output=True, text=True, timeout=60)
+                          env=_env(), capture_output=True, text=True, errors="replace", timeout=60)
     assert proc.returncode != 0
     assert "K (N/m) must be a finite number > 0" in proc.stdout + proc.stderr
 
@@ -133,12 +133,12 @@ def test_stock_liggghts_with_preload_shim_matches_fiberdem(tmp_path: Path) -> No
 
     plain = tmp_path / "plain"
     plain.mkdir()
-    proc = subprocess.run(cmd, cwd=plain, env=_env(), capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(cmd, cwd=plain, env=_env(), capture_output=True, text=True, errors="replace", timeout=60)
     assert proc.returncode != 0 and not (plain / "final.dump").exists()
 
     shimmed = tmp_path / "shim"
     shimmed.mkdir()
     subprocess.run(cmd, cwd=shimmed, env={**_env(), "LD_PRELOAD": str(shim)}, check=True,
-                   capture_output=True, text=True, timeout=60)
+                   capture_output=True, text=True, errors="replace", timeout=60)
     _run(tmp_path / "fiberdem", 1)
     assert np.array_equal(_final_state(shimmed), _final_state(tmp_path / "fiberdem"))

@@ -46,7 +46,7 @@ def stage_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for stage in ("fabric", "flow"):
         r = subprocess.run(
             [sys.executable, "-m", "fiberform", stage, "s.yaml"], cwd=d, env=env,
-            capture_output=True, text=True, timeout=600, check=False,
+            capture_output=True, text=True, errors="replace", timeout=600, check=False,
         )  # fmt: skip
         assert r.returncode == 0, r.stdout + r.stderr
     return d / "runs" / "flowtest"

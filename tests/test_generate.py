@@ -213,7 +213,7 @@ def test_cli_generate_then_fiberdem_loads(tmp_path: Path, build_dir: Path,
     scene.write_text(SCENE)
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
     cmd = [*fiberform_cmd, "generate", str(scene), "--build-dir", str(build_dir)]
-    p = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    p = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, errors="replace", timeout=600)
     assert p.returncode == 0, p.stderr
     out = tmp_path / "runs" / "gen_test" / "fibers"
     import h5py
@@ -226,10 +226,10 @@ def test_cli_generate_then_fiberdem_loads(tmp_path: Path, build_dir: Path,
     assert abs(total - 1e-9) <= masses.max()
     # fiberdem loads the fibers with fix fiber/beam
     q = subprocess.run([str(exe), "-in", "in.fibers", "-log", "log.fiberdem"], cwd=out, env=env,
-                       capture_output=True, text=True, timeout=300, errors="replace")
+                       capture_output=True, text=True, errors="replace", timeout=300, errors="replace")
     assert q.returncode == 0, q.stdout[-2000:]
     log = (out / "log.fiberdem").read_text()
     assert f"fix fiber/beam: {len(masses)} fibers" in log
     # second run is up to date
-    p2 = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    p2 = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, errors="replace", timeout=600)
     assert p2.returncode == 0 and "up to date" in p2.stdout

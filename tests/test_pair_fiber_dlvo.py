@@ -71,7 +71,7 @@ def _run(workdir: Path, ranks: int = 1, length: float = L, example: Path = EXAMP
     if ranks > 1:
         cmd = ["mpirun", "-np", str(ranks), "--oversubscribe"] + cmd
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    res = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=600)
+    res = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, errors="replace", timeout=600)
     log = (workdir / "log.fiberdem").read_text() if (workdir / "log.fiberdem").exists() else ""
     assert res.returncode == 0, f"fiberdem failed:\n{res.stdout[-2000:]}\n{res.stderr[-2000:]}\n{log[-2000:]}"
     rows, cols, on = [], None, False
@@ -208,7 +208,7 @@ def _run_wall(workdir: Path, **var) -> dict[str, np.ndarray]:
            "-var", "L", repr(L_SHORT)]
     for k, v in var.items():
         cmd += ["-var", k, str(v)]
-    res = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=600)
+    res = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, errors="replace", timeout=600)
     log = (workdir / "log").read_text()
     assert res.returncode == 0, log[-2000:]
     rows, on = [], False

@@ -167,7 +167,7 @@ def _stage(
         [*fiberform_cmd, "demo-particles", "scene.yaml", "--build-dir", str(build), *extra],
         cwd=work,
         capture_output=True,
-        text=True,
+        text=True, errors="replace",
         timeout=120,
         env={**os.environ, **(env or {})},
     )

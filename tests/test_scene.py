@@ -184,7 +184,7 @@ def test_bad_scene_exits_2_names_field_writes_nothing(
         else [*fiberform_cmd, command, "scene.yaml"],
         cwd=tmp_path,
         capture_output=True,
-        text=True,
+        text=True, errors="replace",
         timeout=60,
     )
     assert proc.returncode == 2, proc.stderr
@@ -200,7 +200,7 @@ def test_bad_scene_exits_2_names_field_writes_nothing(
 def test_yaml_syntax_error_names_the_line(tmp_path: Path, fiberform_cmd: list[str]) -> None:
     (tmp_path / "scene.yaml").write_text(replace("ranks: 1", "ranks: [1"))
     proc = subprocess.run(
-        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True
+        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True, errors="replace"
     )
     assert proc.returncode == 2
     assert "line 8" in proc.stderr or "line 9" in proc.stderr, proc.stderr
@@ -209,7 +209,7 @@ def test_yaml_syntax_error_names_the_line(tmp_path: Path, fiberform_cmd: list[st
 def test_errors_carry_the_yaml_line(tmp_path: Path, fiberform_cmd: list[str]) -> None:
     (tmp_path / "scene.yaml").write_text(replace("timestep_s: 1.0e-6", "timestep_s: -1.0"))
     proc = subprocess.run(
-        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True
+        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True, errors="replace"
     )
     assert proc.returncode == 2
     assert "run.timestep_s (line 5) = -1.0" in proc.stderr, proc.stderr
@@ -219,7 +219,7 @@ def test_several_problems_are_all_reported(tmp_path: Path, fiberform_cmd: list[s
     text = replace("ranks: 1", "ranks: 0", replace("timestep_s: 1.0e-6", "timestep_s: 0"))
     (tmp_path / "scene.yaml").write_text(text + "colour: red\n")
     proc = subprocess.run(
-        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True
+        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True, errors="replace"
     )
     assert proc.returncode == 2
     for field in ("run.ranks", "run.timestep_s", "colour"):
@@ -232,7 +232,7 @@ def test_good_scene_passes_and_writes_nothing(
 ) -> None:
     (tmp_path / "scene.yaml").write_text(text)
     proc = subprocess.run(
-        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True
+        [*fiberform_cmd, "check", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True, errors="replace"
     )
     assert proc.returncode == 0, proc.stderr
     assert "valid scene 'demo'" in proc.stdout
@@ -244,7 +244,7 @@ def test_shipped_demo_scene_is_valid(repo_root: Path, fiberform_cmd: list[str]) 
     proc = subprocess.run(
         [*fiberform_cmd, "check", str(repo_root / "scenes" / "two-particles.yaml")],
         capture_output=True,
-        text=True,
+        text=True, errors="replace",
     )
     assert proc.returncode == 0, proc.stderr
     assert "demo-particles" in proc.stdout

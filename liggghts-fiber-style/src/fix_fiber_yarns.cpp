@@ -55,6 +55,31 @@ double closest_param(const std::array<double, 3> &a, const std::array<double, 3>
   return t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
 }
 
+// closest points of segments p1-q1 (parameter s) and p2-q2 (parameter t), both clamped to [0, 1]
+void closest_params_seg_seg(const double *p1, const double *q1, const double *p2, const double *q2,
+                            double &s, double &t) {
+  double d1[3], d2[3], r[3];
+  for (int k = 0; k < 3; ++k) {
+    d1[k] = q1[k] - p1[k];
+    d2[k] = q2[k] - p2[k];
+    r[k] = p1[k] - p2[k];
+  }
+  const double a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2];
+  const double e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2];
+  const double f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2];
+  auto clamp01 = [](double v) { return v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v); };
+  if (a <= 0.0 && e <= 0.0) { s = t = 0.0; return; }
+  if (a <= 0.0) { s = 0.0; t = clamp01(f / e); return; }
+  const double c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2];
+  if (e <= 0.0) { t = 0.0; s = clamp01(-c / a); return; }
+  const double b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2];
+  const double denom = a * e - b * b;
+  s = denom > 1e-14 * a * e ? clamp01((b * f - c * e) / denom) : 0.0;
+  t = (b * s + f) / e;
+  if (t < 0.0) { t = 0.0; s = clamp01(-c / a); }
+  else if (t > 1.0) { t = 1.0; s = clamp01((b - c) / a); }
+}
+
 }  // namespace
 
 FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
@@ -103,6 +128,18 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
       need(1);
       substeps_ = static_cast<int>(val(1));
       if (substeps_ < 1) error->all(FLERR, "fix fiber/yarns: substeps must be >= 1");
+      iarg += 2;
+    } else if (kw == "settle_measure") {
+      need(1);
+      const std::string m = arg[iarg + 1];
+      if (m == "node") settle_fiber_ = false;
+      else if (m == "fiber") settle_fiber_ = true;
+      else error->all(FLERR, "fix fiber/yarns: settle_measure must be node or fiber");
+      iarg += 2;
+    } else if (kw == "friction") {
+      need(1);
+      mu_ = val(1);
+      if (!(mu_ >= 0.0)) error->all(FLERR, "fix fiber/yarns: friction must be >= 0");
       iarg += 2;
     } else if (kw == "terms") {
       need(1);
@@ -161,7 +198,16 @@ void FixFiberYarns::read_yarns(const char *path) {
     if (!(ls >> p[0] >> p[1] >> p[2] >> r) || !(r > 0.0))
       error->all(FLERR, errtext(std::string(path) + ":" + std::to_string(lineno) +
                                 ": expected 'yarn-index x y z radius' with radius > 0"));
-    if (yarn == prev_yarn) segs_.push_back({prev, p, 0.5 * (prev_r + r), yarn});
+    if (yarn == prev_yarn) {
+      Segment sg{prev, p, 0.5 * (prev_r + r), yarn, {0, 0, 0}, 0.0};
+      double l2 = 0.0;
+      for (int k = 0; k < 3; ++k) {
+        sg.c[k] = 0.5 * (prev[k] + p[k]);
+        l2 += (p[k] - prev[k]) * (p[k] - prev[k]);
+      }
+      sg.half = 0.5 * std::sqrt(l2);
+      segs_.push_back(sg);
+    }
     prev_yarn = yarn;
     prev = p;
     prev_r = r;
@@ -185,8 +231,10 @@ void FixFiberYarns::build_bins() {
     lmax = std::max(lmax, std::sqrt(l2));
   }
   bin_size_ = std::max(rmax, lmax);
-  // reach beyond the yarn surface covered by the bins: a fiber radius of up to the yarn radius
-  const double reach = rmax;
+  // reach beyond the yarn surface covered by the bins: a fiber radius of up to the yarn radius, or
+  // (set in init) the fiber radius plus one element length, so that the candidates looked up at an
+  // element's end nodes and midpoint cover its closest point
+  const double reach = std::max(rmax, bin_reach_);
   for (int k = 0; k < 3; ++k) bin_lo_[k] -= 2.0 * bin_size_;
   for (int id = 0; id < static_cast<int>(segs_.size()); ++id) {
     const Segment &s = segs_[id];
@@ -206,13 +254,37 @@ int FixFiberYarns::setmask() { return POST_FORCE | PRE_EXCHANGE | END_OF_STEP; }
 void FixFiberYarns::end_of_step() {
   if (!(settle_speed_ > 0.0)) return;
   double vmax = 0.0;
-  for (int i = 0; i < atom->nlocal; ++i) {
-    if (!(atom->mask[i] & groupbit)) continue;
-    const double *v = atom->v[i];
-    vmax = std::max(vmax, v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  if (settle_fiber_) {
+    // centre-of-mass velocity of each fiber: sums of m v and m by fiber ID over all ranks
+    int idmax = -1, gidmax = -1;
+    for (int i = 0; i < atom->nlocal; ++i)
+      if ((atom->mask[i] & groupbit) && beam_->is_node(i)) idmax = std::max(idmax, beam_->fiber_id(i));
+    MPI_Allreduce(&idmax, &gidmax, 1, MPI_INT, MPI_MAX, world);
+    if (gidmax >= 0) {
+      std::vector<double> loc(4 * static_cast<size_t>(gidmax + 1), 0.0), glob(loc.size());
+      for (int i = 0; i < atom->nlocal; ++i) {
+        if (!(atom->mask[i] & groupbit) || !beam_->is_node(i)) continue;
+        double *row = &loc[4 * static_cast<size_t>(beam_->fiber_id(i))];
+        const double m = atom->rmass[i];
+        for (int k = 0; k < 3; ++k) row[k] += m * atom->v[i][k];
+        row[3] += m;
+      }
+      MPI_Allreduce(loc.data(), glob.data(), static_cast<int>(loc.size()), MPI_DOUBLE, MPI_SUM, world);
+      for (size_t f = 0; f + 3 < glob.size(); f += 4)
+        if (glob[f + 3] > 0.0)
+          vmax = std::max(vmax, (glob[f] * glob[f] + glob[f + 1] * glob[f + 1] + glob[f + 2] * glob[f + 2]) /
+                                    (glob[f + 3] * glob[f + 3]));
+    }
+    max_speed_ = std::sqrt(vmax);
+  } else {
+    for (int i = 0; i < atom->nlocal; ++i) {
+      if (!(atom->mask[i] & groupbit)) continue;
+      const double *v = atom->v[i];
+      vmax = std::max(vmax, v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    }
+    MPI_Allreduce(&vmax, &max_speed_, 1, MPI_DOUBLE, MPI_MAX, world);
+    max_speed_ = std::sqrt(max_speed_);
   }
-  MPI_Allreduce(&vmax, &max_speed_, 1, MPI_DOUBLE, MPI_MAX, world);
-  max_speed_ = std::sqrt(max_speed_);
   settled_checks_ = max_speed_ < settle_speed_ ? settled_checks_ + 1.0 : 0.0;
 }
 
@@ -220,6 +292,29 @@ void FixFiberYarns::init() {
   beam_ = FixFiberBeam::find(lmp);
   if (!beam_) error->all(FLERR, "fix fiber/yarns: needs a fix fiber/beam (fiber topology and sections)");
   if (!atom->rmass_flag) error->all(FLERR, "fix fiber/yarns: needs per-atom mass (atom_style sphere)");
+  if (!atom->map_style) error->all(FLERR, "fix fiber/yarns: needs atom_modify map array (element contact)");
+  // bins must cover the elements: reach = largest fiber radius + longest element (local maxima)
+  double loc[2] = {0.0, 0.0}, glob[2];
+  for (int i = 0; i < atom->nlocal; ++i) {
+    if (!(atom->mask[i] & groupbit) || !beam_->is_node(i)) continue;
+    double rr[4];
+    beam_->section_radii(i, rr);
+    loc[0] = std::max(loc[0], std::max(rr[0], rr[1]));
+    if (beam_->node_index(i) + 1 < beam_->node_count(i)) {
+      const int j = atom->map(atom->tag[i] + 1);
+      if (j >= 0) {
+        double l2 = 0.0;
+        for (int k = 0; k < 3; ++k) l2 += (atom->x[j][k] - atom->x[i][k]) * (atom->x[j][k] - atom->x[i][k]);
+        loc[1] = std::max(loc[1], std::sqrt(l2));
+      }
+    }
+  }
+  MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, world);
+  const double reach = glob[0] + law_.h_cut + glob[1];
+  if (reach > bin_reach_) {
+    bin_reach_ = reach;
+    build_bins();
+  }
   // the contact force uses the other forces on the node: they must be summed before this fix
   bool after = false;
   for (int k = 0; k < modify->nfix; ++k) {
@@ -254,7 +349,187 @@ void FixFiberYarns::apply_contact(int i, const double n[3], double h, double r1,
   }
   const double fc = m * ((u - u0) / dt - a_ext);  // average contact force over the step
   for (int k = 0; k < 3; ++k) f[k] += fc * n[k];
+  if (mu_ > 0.0 && fc > 0.0) apply_friction(i, -1, 0.0, n, fc);
   gap_min = std::min(gap_min, h);
+}
+
+
+/* One element (nodes i, j) against a static body at the element point of parameter s (0: i, 1: j):
+   the contact point's normal motion over the step with velocity-Verlet sub-steps, effective mass
+   1/m = (1-s)^2/m_i + s^2/m_j, the other forces on both nodes held constant; the average contact
+   force is split by the lever rule ((1-s) to i, s to j: total force and torque about any point kept,
+   thesis 2.4.2). */
+void FixFiberYarns::apply_element_contact(int i, int j, double s, const double n[3], double h, double r1,
+                                          double r2, double &gap_min) {
+  double *vi = atom->v[i], *vj = atom->v[j], *fi = atom->f[i], *fj = atom->f[j];
+  const double mi = atom->rmass[i], mj = atom->rmass[j];
+  const double wi = 1.0 - s, wj = s;
+  const double dt = update->dt;
+  double u0 = 0.0, a_ext = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    u0 += (wi * vi[k] + wj * vj[k]) * n[k];
+    a_ext += (wi * fi[k] / mi + wj * fj[k] / mj) * n[k];
+  }
+  if (h - 2.0 * std::fabs(u0) * dt >= law_.h_cut) return;
+  const double inv_m = wi * wi / mi + wj * wj / mj;
+  const double m = 1.0 / inv_m;
+  phys::PairLaw pl;
+  pl.setup(law_, r1, r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
+  const double hs = dt / substeps_;
+  double hh = h, u = u0;
+  double acc = a_ext + pl.force(hh, u) / m;
+  for (int k = 0; k < substeps_; ++k) {
+    u += 0.5 * hs * acc;
+    hh += hs * u;
+    acc = a_ext + pl.force(hh, u) / m;
+    u += 0.5 * hs * acc;
+  }
+  const double fc = m * ((u - u0) / dt - a_ext);
+  for (int k = 0; k < 3; ++k) {
+    fi[k] += wi * fc * n[k];
+    fj[k] += wj * fc * n[k];
+  }
+  if (mu_ > 0.0 && fc > 0.0) apply_friction(i, j, s, n, fc);
+  gap_min = std::min(gap_min, h);
+}
+
+/* Coulomb friction at a contact point (element i-j at parameter s, or node i when j < 0) against a
+   static body, at the velocity level: the tangential force that would stop the point's tangential
+   motion over the next step (cancelling its other tangential forces) is applied if it is within
+   mu * fn (stick), else mu * fn along it (slip). Split to the nodes by the lever rule. */
+void FixFiberYarns::apply_friction(int i, int j, double s, const double n[3], double fn) {
+  const double dt = update->dt;
+  const double wi = j < 0 ? 1.0 : 1.0 - s, wj = j < 0 ? 0.0 : s;
+  const double mi = atom->rmass[i], mj = j < 0 ? 1.0 : atom->rmass[j];
+  const double *vi = atom->v[i], *fi = atom->f[i];
+  const double *vj = j < 0 ? vi : atom->v[j], *fj = j < 0 ? fi : atom->f[j];
+  const double inv_m = wi * wi / mi + (j < 0 ? 0.0 : wj * wj / mj);
+  double vt[3], at[3], vn = 0.0, an = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    vt[k] = wi * vi[k] + wj * vj[k];
+    at[k] = wi * fi[k] / mi + (j < 0 ? 0.0 : wj * fj[k] / mj);
+    vn += vt[k] * n[k];
+    an += at[k] * n[k];
+  }
+  double ft[3], ft2 = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    ft[k] = -((vt[k] - vn * n[k]) / dt + (at[k] - an * n[k])) / inv_m;
+    ft2 += ft[k] * ft[k];
+  }
+  const double lim = mu_ * fn;
+  const double scale = ft2 > lim * lim ? lim / std::sqrt(ft2) : 1.0;
+  for (int k = 0; k < 3; ++k) {
+    atom->f[i][k] += wi * scale * ft[k];
+    if (j >= 0) atom->f[j][k] += wj * scale * ft[k];
+  }
+}
+
+// candidate yarn segments of the bin holding point p (appended)
+void FixFiberYarns::collect_segments(const double *p, std::vector<int> &out) const {
+  const int bx = static_cast<int>(std::floor((p[0] - bin_lo_[0]) / bin_size_));
+  const int by = static_cast<int>(std::floor((p[1] - bin_lo_[1]) / bin_size_));
+  const int bz = static_cast<int>(std::floor((p[2] - bin_lo_[2]) / bin_size_));
+  auto it = bins_.find(bin_key(bx, by, bz));
+  if (it != bins_.end()) out.insert(out.end(), it->second.begin(), it->second.end());
+}
+
+/* Element i-j against the yarns: per yarn, the segment with the smallest separation between the
+   element's centre line and the yarn's centre line (closest points of two segments) acts. */
+void FixFiberYarns::element_yarn_contacts(int i, int j, double r1, double &gap_min) {
+  double **x = atom->x;
+  double mid[3];
+  for (int k = 0; k < 3; ++k) mid[k] = 0.5 * (x[i][k] + x[j][k]);
+  // the bins reach the fiber radius + h_cut + one element length beyond each yarn surface, so the
+  // midpoint's bin holds every segment that any point of the element can touch
+  cand_.clear();
+  collect_segments(mid, cand_);
+  if (cand_.empty()) return;
+  double he2 = 0.0;
+  for (int k = 0; k < 3; ++k) he2 += (x[j][k] - x[i][k]) * (x[j][k] - x[i][k]);
+  const double half_e = 0.5 * std::sqrt(he2);
+  const double dt = update->dt;
+  double vmax2 = 0.0;
+  for (int k = 0; k < 3; ++k) vmax2 = std::max(vmax2, std::max(atom->v[i][k] * atom->v[i][k], atom->v[j][k] * atom->v[j][k]));
+  const double margin = r1 + law_.h_cut + 1e-3 * r1 + 4.0 * std::sqrt(3.0 * vmax2) * dt;
+  int best_yarn[8];
+  double best_h[8], best_n[8][3], best_r[8], best_s[8];
+  int nbest = 0;
+  for (int id : cand_) {
+    const Segment &sg = segs_[id];
+    // bounding spheres of the two segments: cheap rejection
+    const double dc2 = (mid[0] - sg.c[0]) * (mid[0] - sg.c[0]) + (mid[1] - sg.c[1]) * (mid[1] - sg.c[1]) +
+                       (mid[2] - sg.c[2]) * (mid[2] - sg.c[2]);
+    const double reach = half_e + sg.half + sg.radius + margin;
+    if (dc2 > reach * reach) continue;
+    double se, ty;
+    closest_params_seg_seg(x[i], x[j], sg.a.data(), sg.b.data(), se, ty);
+    double d[3];
+    for (int k = 0; k < 3; ++k)
+      d[k] = (x[i][k] + se * (x[j][k] - x[i][k])) - (sg.a[k] + ty * (sg.b[k] - sg.a[k]));
+    const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const double h = dist - sg.radius - r1;
+    if (h >= margin - r1 || dist <= 0.0) continue;
+    int slot = -1;
+    for (int b = 0; b < nbest; ++b)
+      if (best_yarn[b] == sg.yarn) slot = b;
+    if (slot < 0) {
+      if (nbest == 8) continue;
+      slot = nbest++;
+      best_yarn[slot] = sg.yarn;
+      best_h[slot] = std::numeric_limits<double>::max();
+    }
+    if (h < best_h[slot]) {
+      best_h[slot] = h;
+      best_r[slot] = sg.radius;
+      best_s[slot] = se;
+      for (int k = 0; k < 3; ++k) best_n[slot][k] = d[k] / dist;
+    }
+  }
+  for (int b = 0; b < nbest; ++b) {
+    local_[0] += 1.0;
+    apply_element_contact(i, j, best_s[b], best_n[b], best_h[b], r1, best_r[b], gap_min);
+  }
+}
+
+void FixFiberYarns::node_yarn_contacts(int i, double r1, double &gap_min) {
+  double **x = atom->x;
+  // yarns: the closest segment of each yarn near the node
+  const int bx = static_cast<int>(std::floor((x[i][0] - bin_lo_[0]) / bin_size_));
+  const int by = static_cast<int>(std::floor((x[i][1] - bin_lo_[1]) / bin_size_));
+  const int bz = static_cast<int>(std::floor((x[i][2] - bin_lo_[2]) / bin_size_));
+  auto it = bins_.find(bin_key(bx, by, bz));
+  if (it == bins_.end()) return;
+  // per yarn: best (smallest h) segment
+  int best_yarn[8];
+  double best_h[8], best_n[8][3], best_r[8];
+  int nbest = 0;
+  for (int id : it->second) {
+    const Segment &s = segs_[id];
+    const double t = closest_param(s.a, s.b, x[i]);
+    double d[3];
+    for (int k = 0; k < 3; ++k) d[k] = x[i][k] - (s.a[k] + t * (s.b[k] - s.a[k]));
+    const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const double h = dist - s.radius - r1;
+    if (h >= law_.h_cut + 1e-3 * r1 || dist <= 0.0) continue;
+    int slot = -1;
+    for (int b = 0; b < nbest; ++b)
+      if (best_yarn[b] == s.yarn) slot = b;
+    if (slot < 0) {
+      if (nbest == 8) continue;
+      slot = nbest++;
+      best_yarn[slot] = s.yarn;
+      best_h[slot] = std::numeric_limits<double>::max();
+    }
+    if (h < best_h[slot]) {
+      best_h[slot] = h;
+      best_r[slot] = s.radius;
+      for (int k = 0; k < 3; ++k) best_n[slot][k] = d[k] / dist;
+    }
+  }
+  for (int b = 0; b < nbest; ++b) {
+    local_[0] += 1.0;
+    apply_contact(i, best_n[b], best_h[b], r1, best_r[b], gap_min);
+  }
 }
 
 void FixFiberYarns::post_force(int) {
@@ -278,43 +553,19 @@ void FixFiberYarns::post_force(int) {
       }
     }
     if (segs_.empty()) continue;
-    // yarns: the closest segment of each yarn near the node
-    const int bx = static_cast<int>(std::floor((x[i][0] - bin_lo_[0]) / bin_size_));
-    const int by = static_cast<int>(std::floor((x[i][1] - bin_lo_[1]) / bin_size_));
-    const int bz = static_cast<int>(std::floor((x[i][2] - bin_lo_[2]) / bin_size_));
-    auto it = bins_.find(bin_key(bx, by, bz));
-    if (it == bins_.end()) continue;
-    // per yarn: best (smallest h) segment
-    int best_yarn[8];
-    double best_h[8], best_n[8][3], best_r[8];
-    int nbest = 0;
-    for (int id : it->second) {
-      const Segment &s = segs_[id];
-      const double t = closest_param(s.a, s.b, x[i]);
-      double d[3];
-      for (int k = 0; k < 3; ++k) d[k] = x[i][k] - (s.a[k] + t * (s.b[k] - s.a[k]));
-      const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      const double h = dist - s.radius - r1;
-      if (h >= law_.h_cut + 1e-3 * r1 || dist <= 0.0) continue;
-      int slot = -1;
-      for (int b = 0; b < nbest; ++b)
-        if (best_yarn[b] == s.yarn) slot = b;
-      if (slot < 0) {
-        if (nbest == 8) continue;
-        slot = nbest++;
-        best_yarn[slot] = s.yarn;
-        best_h[slot] = std::numeric_limits<double>::max();
-      }
-      if (h < best_h[slot]) {
-        best_h[slot] = h;
-        best_r[slot] = s.radius;
-        for (int k = 0; k < 3; ++k) best_n[slot][k] = d[k] / dist;
-      }
+    if (beam_->node_count(i) > 1) {
+      // element to the next node (owned by this node); a fiber's elements cover its nodes
+      if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
+      int j = atom->map(atom->tag[i] + 1);
+      if (j < 0 || j >= nlocal)
+        error->one(FLERR, "fix fiber/yarns: the next node of an element is not owned by this rank "
+                          "(element contact runs on one rank only)");
+      double rj[4];
+      beam_->section_radii(j, rj);
+      element_yarn_contacts(i, j, std::max(r1, std::max(rj[0], rj[1])), gap_min);
+      continue;
     }
-    for (int b = 0; b < nbest; ++b) {
-      local_[0] += 1.0;
-      apply_contact(i, best_n[b], best_h[b], r1, best_r[b], gap_min);
-    }
+    node_yarn_contacts(i, r1, gap_min);
   }
   local_[2] = -gap_min;
   sums_valid_ = false;

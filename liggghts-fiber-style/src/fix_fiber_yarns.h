@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later
    fix fiber/yarns: static bodies for fix fiber/beam fibers during lay-down (Kettil 2016 sec. 3.1):
    fabric yarns as chains of cylinders (polylines with a radius) and planes, both of infinite mass,
-   acting on every fiber node through the fiber/dlvo contact law (physics/contact_law.h, read-only),
+   acting on every fiber element (yarns; closest points of the centre lines, lever rule) and node
+   (planes) through the fiber/dlvo contact law (physics/contact_law.h, read-only), optional friction,
    sub-integrated over the step; and removal of whole fibers that reach a height (the bottom).
 
    Syntax (full page: docs/styles/fix_fiber_yarns.md):
@@ -9,7 +10,9 @@
        remove_below z      remove every fiber any node of which is below z (m)
        remove_every N      check for removal every N steps (default 100)
        settle V M          every M steps: count consecutive checks with max node speed < V (m/s)
+       settle_measure node|fiber   node speeds (default) or fiber centre-of-mass speeds
        substeps N          velocity-Verlet sub-steps per step for each contact (default 100)
+       friction mu         Coulomb friction coefficient against yarns and planes (default 0)
        terms LIST          comma list of vdw, es, steric (default steric)
        hamaker A | psi V | ionic_strength I | temperature T | eps_r e | h0 h | h_cut h |
        h_R h | h_S h | t_R t      as in pair_style fiber/dlvo */
@@ -38,11 +41,17 @@ class FixFiberYarns : public Fix {
   double compute_vector(int n) override;
 
  private:
-  struct Segment { std::array<double, 3> a, b; double radius; int yarn; };
+  struct Segment { std::array<double, 3> a, b; double radius; int yarn; std::array<double, 3> c; double half; };
   struct Plane { std::array<double, 3> p, n; };
   void read_yarns(const char *path);
   void build_bins();
   void apply_contact(int i, const double n[3], double h, double r1, double r2, double &gap_min);
+  void apply_element_contact(int i, int j, double s, const double n[3], double h, double r1, double r2,
+                             double &gap_min);
+  void element_yarn_contacts(int i, int j, double r1, double &gap_min);
+  void node_yarn_contacts(int i, double r1, double &gap_min);
+  void collect_segments(const double *p, std::vector<int> &out) const;
+  void apply_friction(int i, int j, double s, const double n[3], double fn);
   long bin_key(int ix, int iy, int iz) const { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
 
   std::vector<Segment> segs_;
@@ -51,15 +60,19 @@ class FixFiberYarns : public Fix {
   double bin_size_ = 0.0, bin_lo_[3] = {0, 0, 0};
   fiberform::physics::ContactLaw law_;
   int substeps_ = 100;
+  double mu_ = 0.0;                 // Coulomb friction coefficient against yarns and planes
   bool remove_ = false;
   double remove_z_ = 0.0;
   int remove_every_ = 100;
   class FixFiberBeam *beam_ = nullptr;
   double settle_speed_ = -1.0;  // < 0: no settle check
+  bool settle_fiber_ = false;   // settle on fiber centre-of-mass speeds instead of node speeds
   double settled_checks_ = 0, max_speed_ = 0;
   double removed_fibers_ = 0, removed_mass_ = 0, removed_nodes_ = 0;
   double local_[3] = {0, 0, 0};  // yarn contacts, plane contacts, -min gap
   double sums_[3] = {0, 0, 0};
+  std::vector<int> cand_;           // scratch: candidate yarn segments of one element
+  double bin_reach_ = 0.0;          // reach of the bins beyond a yarn surface (set in init)
   bool sums_valid_ = false;
 };
 

@@ -146,6 +146,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         outcome = st.execute(ctx)
         outcomes.append(outcome)
         state = "up to date" if outcome.skipped else f"done in {outcome.elapsed_s:.2f} s"
+        if outcome.message not in ("done", "up to date"):
+            state += f" ({outcome.message})"
         print(f"[{i}/{len(stages)}] {st.name}: {state}", flush=True)
     root = scene.output_path
     lines = [
@@ -159,6 +161,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for o in outcomes:
         products = ", ".join(f"`{p.relative_to(root) if p.is_relative_to(root) else p}`" for p in o.products)
         status = "up to date (earlier run)" if o.skipped else "ran"
+        if o.message not in ("done", "up to date"):
+            status += f" ({o.message})"
         lines.append(f"| {o.stage} | {status} | {o.elapsed_s:.2f} | {products} |")
     lines += ["", "Each stage folder holds its own `report.md` (where the stage writes one) and the logs "
               "of the programs it ran (`log.<tool>`)."]

@@ -428,6 +428,14 @@ class ContactSection(_Section):
     friction_coefficient: float | None = quantity(
         "Coulomb friction coefficient", "1", default=None, ge=0.0, le=10.0
     )
+    substeps: int = quantity(
+        "Velocity-Verlet sub-steps per step of each contact (integrator substep only)", "1",
+        default=100, ge=1, le=100000,
+    )  # fmt: skip
+    points_per_element: int | None = quantity(
+        "Contact points per fiber element (fiber_dlvo; absent: chosen by the pair style, "
+        "auto 1e-9)", "1", default=None, ge=1, le=64,
+    )  # fmt: skip
 
     @model_validator(mode="after")
     def _check(self) -> ContactSection:
@@ -647,6 +655,15 @@ class LaydownSection(_Section):
         "Settled when the largest node speed stays below this", "m/s", default=2.0e-3,
         gt=0.0, le=10.0,
     )  # fmt: skip
+    settle_speed_fraction: float | None = quantity(
+        "Settle threshold relative to the superficial velocity of the flow stage (replaces "
+        "settle_speed_m_s when given)", "1", default=None, gt=0.0, le=10.0,
+    )  # fmt: skip
+    settle_measure: Literal["node", "fiber"] = choice(
+        "Speed the settle criterion tests: node (largest node speed) or fiber (largest fiber "
+        "centre-of-mass speed; free fiber ends fluttering in the flow do not count)",
+        default="node",
+    )
     settle_checks: int = quantity(
         "Consecutive checks below settle_speed_m_s that end the run", "1", default=5, ge=1,
         le=10000,
@@ -655,14 +672,20 @@ class LaydownSection(_Section):
         "Fibers with a node below this height are removed (absent: fabric lower side - 50 um)",
         "m", default=None, ge=-10.0, le=10.0,
     )  # fmt: skip
-    walls: Literal["fiber_yarns", "wall_fiber_dlvo"] = choice(
+    walls: Literal["fiber_yarns", "wall_fiber_dlvo", "wall_gran"] = choice(
         "The four vertical side planes: fiber_yarns (planes of fix fiber/yarns, fiber/dlvo law, "
-        "sub-stepped) or wall_fiber_dlvo (fix wall/fiber/dlvo of the contact styles)",
+        "sub-stepped), wall_fiber_dlvo (fix wall/fiber/dlvo of the contact styles) or wall_gran "
+        "(stock LIGGGHTS fix wall/gran, Hertz, frictionless; for comparisons)",
         default="fiber_yarns",
     )
     terms: list[ContactTerm] = choice(
         "Terms of the fiber/dlvo law against yarns and walls", default=["steric"]
     )
+    friction_coefficient: float = quantity(
+        "Coulomb friction coefficient of fibers on yarns and side planes (fix fiber/yarns, "
+        "velocity-level stick/slip; 0: frictionless as the fiber/dlvo law)", "1", default=0.0,
+        ge=0.0, le=10.0,
+    )  # fmt: skip
     contact_substeps: int = quantity(
         "Velocity-Verlet sub-steps per step of each node-yarn contact", "1", default=100, ge=1,
         le=100000,

@@ -394,10 +394,15 @@ def generate_fibers(
                            cross_section="circular" if cross_section == "circular" else "collapsed",
                            wall_fraction=wall_fraction, twist_max_rad=twist_max_rad,
                            radius_jitter=radius_jitter, aspect=aspect)
-        base = fiber_shape(shape, rng)
-        rmax = float(np.max(base.radii[:, :2]))
-        lo, hi = base.x.min(axis=0) - rmax, base.x.max(axis=0) + rmax
-        room = (box_hi - box_lo) - (hi - lo)
+        # orientations whose bounding box does not fit the placement box are redrawn (a thin
+        # placement box thus gives nearly horizontal fibers)
+        for _ in range(max_attempts):
+            base = fiber_shape(shape, rng)
+            rmax = float(np.max(base.radii[:, :2]))
+            lo, hi = base.x.min(axis=0) - rmax, base.x.max(axis=0) + rmax
+            room = (box_hi - box_lo) - (hi - lo)
+            if np.all(room > 0):
+                break
         if np.any(room <= 0):
             raise StageError(
                 f"a fiber of length {L:.3g} m does not fit into the domain "

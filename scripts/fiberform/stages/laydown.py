@@ -31,11 +31,11 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import FiberformError, StageError
-from ..inputs import LiggghtsInput, dump_format, file_token, fix_ref, quit_if_at_least
+from ..inputs import STAR, LiggghtsInput, dump_format, file_token, fix_ref, quit_if_at_least
 from ..provenance import file_hash, write_dataset
 from ..runner import liggghts_progress, run
 from ..scene import FluidSection, Scene
-from ._stage import Stage, StageContext
+from ._stage import Outcome, Stage, StageContext
 from .fabric import FabricStage
 from .flow import FlowStage
 from .generate import Generate
@@ -66,7 +66,18 @@ def removal_height(scene: Scene) -> float:
     return ld.removal_height_m if ld.removal_height_m is not None else fab.lower_side_z_m - 50e-6
 
 
-def build_input(scene: Scene, steps_per_check: int, checks: int) -> str:
+# fix wall/gran material (stock Hertz model): soft enough for the fiber time step, frictionless as
+# the yarns; one atom type
+WALL_GRAN_MATERIAL: tuple[tuple[str, str, tuple[object, ...]], ...] = (
+    ("wallmat1", "youngsModulus", ("peratomtype", 1.0e7)),
+    ("wallmat2", "poissonsRatio", ("peratomtype", 0.3)),
+    ("wallmat3", "coefficientRestitution", ("peratomtypepair", 1, 0.5)),
+    ("wallmat4", "coefficientFriction", ("peratomtypepair", 1, 0.0)),
+)
+
+
+def build_input(scene: Scene, steps_per_check: int, checks: int,
+                settle_speed: float | None = None) -> str:
     """The LIGGGHTS input of the lay-down (files in the working folder: fibers.data,
     fibers.nodes, flow.grid, yarns.txt)."""
     f, ld, dom = scene.fibers, scene.laydown, scene.domain
@@ -79,7 +90,8 @@ def build_input(scene: Scene, steps_per_check: int, checks: int) -> str:
     s.command("atom_style", "sphere")
     s.command("atom_modify", "map", "array", "sort", 0, 0.0)
     s.command("boundary", "f", "f", "f")
-    s.command("newton", "off")
+    # pair_style fiber/dlvo needs newton on; the fixes are single-rank and indifferent to it
+    s.command("newton", "on" if scene.contact is not None else "off")
     s.command("communicate", "single", "vel", "yes")
     s.command("read_data", file_token("fibers.data"))
     s.command("neighbor", 0.1 * f.width_m, "bin")
@@ -100,14 +112,27 @@ def build_input(scene: Scene, steps_per_check: int, checks: int) -> str:
     if ld.walls == "fiber_yarns":
         for p in planes:
             plane_args += ["plane", *p]
+    elif ld.walls == "wall_gran":  # stock LIGGGHTS granular walls (comparison option)
+        for name, style, value in WALL_GRAN_MATERIAL:
+            s.command("fix", name, "all", "property/global", style, *value)
+        for k, p in enumerate(planes):
+            axis = "xplane" if p[3] != 0.0 else "yplane"
+            s.command("fix", f"wall{k}", "all", "wall/gran", "model", "hertz", "tangential",
+                      "no_history", "primitive", "type", 1, axis, p[0] if p[3] != 0.0 else p[1])
     else:  # the contact styles' own wall fix, one per plane
         for k, p in enumerate(planes):
             s.command("fix", f"wall{k}", "all", "wall/fiber/dlvo", "plane", *p, "terms", terms,
                       "integrator", "substep", ld.contact_substeps)
     s.command("fix", "yarns", "all", "fiber/yarns", "yarns", file_token(YARNS_NAME), *plane_args,
               "remove_below", removal_height(scene), "remove_every", steps_per_check,
-              "settle", ld.settle_speed_m_s, steps_per_check, "substeps", ld.contact_substeps,
-              "terms", terms)
+              "settle",
+              settle_speed if settle_speed is not None else ld.settle_speed_m_s, steps_per_check, "settle_measure", ld.settle_measure,
+              "substeps", ld.contact_substeps,
+              "terms", terms, "friction", ld.friction_coefficient)
+    c = scene.contact
+    if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
+        s.command("pair_style", "fiber/dlvo", *pair_options(scene))
+        s.command("pair_coeff", STAR, STAR)
     s.command("timestep", ld.timestep_s)
     s.command("variable", "settled", "equal", fix_ref("yarns", 7))
     s.command("thermo_style", "custom", "step", "atoms", fix_ref("yarns", 1), fix_ref("yarns", 2),
@@ -127,6 +152,27 @@ def build_input(scene: Scene, steps_per_check: int, checks: int) -> str:
     return s.render()
 
 
+def pair_options(scene: Scene) -> list[object]:
+    """pair_style fiber/dlvo keywords from the scene's contact section."""
+    c = scene.contact
+    assert c is not None
+    out: list[object] = ["integrator", c.integrator]
+    if c.integrator == "substep":
+        out.append(c.substeps)
+    out += ["terms", ",".join(c.terms)]
+    if c.hamaker_J is not None:
+        out += ["hamaker", c.hamaker_J]
+    if c.ionic_strength_mol_m3 is not None:
+        out += ["ionic_strength", c.ionic_strength_mol_m3]
+    if c.surface_potential_V is not None:
+        out += ["psi", c.surface_potential_V]
+    if c.cutoff_m is not None:
+        out += ["h_cut", c.cutoff_m]
+    if c.points_per_element is not None:
+        out += ["points", c.points_per_element]
+    return out
+
+
 def write_yarns(path: Path, fabric_h5: Path) -> tuple[Array, Array, Array]:
     """The fabric's yarn centrelines as fix fiber/yarns reads them: ``yarn x y z radius``."""
     with h5py.File(fabric_h5, "r") as h5:
@@ -143,9 +189,7 @@ def write_yarns(path: Path, fabric_h5: Path) -> tuple[Array, Array, Array]:
 
 def yarn_distances(x: Array, pts: Array, offs: Array, rad: Array) -> Array:
     """For each point of x (n, 3): min over yarns of (distance to the centreline - radius), m."""
-    a = np.vstack([pts[offs[k]:offs[k + 1] - 1] for k in range(len(rad))])
-    b = np.vstack([pts[offs[k] + 1:offs[k + 1]] for k in range(len(rad))])
-    r = np.concatenate([np.full(offs[k + 1] - offs[k] - 1, rad[k]) for k in range(len(rad))])
+    a, b, r = _yarn_segments(pts, offs, rad)
     out = np.full(len(x), np.inf)
     d = b - a
     dd = np.einsum("ij,ij->i", d, d)
@@ -154,6 +198,75 @@ def yarn_distances(x: Array, pts: Array, offs: Array, rad: Array) -> Array:
         dist = np.linalg.norm(p - (a + t[:, None] * d), axis=1) - r
         out[i] = float(dist.min())
     return out
+
+
+def _yarn_segments(pts: Array, offs: Array, rad: Array) -> tuple[Array, Array, Array]:
+    a = np.vstack([pts[offs[k]:offs[k + 1] - 1] for k in range(len(rad))])
+    b = np.vstack([pts[offs[k] + 1:offs[k + 1]] for k in range(len(rad))])
+    r = np.concatenate([np.full(offs[k + 1] - offs[k] - 1, rad[k]) for k in range(len(rad))])
+    return a, b, r
+
+
+def segment_distances(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
+    """Distances between the segments p1-q1 (n, 3) and p2-q2 (m, 3): (n, m), exact (closest points
+    of two segments with both parameters clamped to [0, 1])."""
+    d1 = (q1 - p1)[:, None, :]
+    d2 = (q2 - p2)[None, :, :]
+    r = p1[:, None, :] - p2[None, :, :]
+    a = np.einsum("ijk,ijk->ij", d1, d1) + np.zeros(r.shape[:2])
+    e = np.einsum("ijk,ijk->ij", d2, d2) + np.zeros(r.shape[:2])
+    b = np.einsum("ijk,ijk->ij", d1, d2)
+    c = np.einsum("ijk,ijk->ij", d1, r)
+    f = np.einsum("ijk,ijk->ij", d2, r)
+    sa, se = np.where(a > 0, a, 1.0), np.where(e > 0, e, 1.0)
+    den = a * e - b * b
+    s = np.where(den > 1e-14 * a * e, np.clip((b * f - c * e) / np.where(den > 0, den, 1.0), 0, 1), 0.0)
+    t = (b * s + f) / se
+    lo, hi = t < 0.0, t > 1.0
+    s = np.where(lo, np.clip(-c / sa, 0, 1), np.where(hi, np.clip((b - c) / sa, 0, 1), s))
+    t = np.clip(t, 0.0, 1.0)
+    s = np.where(a > 0, s, 0.0)
+    t = np.where(e > 0, np.where(a > 0, t, np.clip(f / se, 0, 1)), 0.0)
+    s = np.where((a > 0) & (e <= 0), np.clip(-c / sa, 0, 1), s)
+    diff = r + s[..., None] * d1 - t[..., None] * d2
+    return np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+
+
+def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Array) -> float:
+    """Smallest (distance between a fiber element's centre line and a yarn segment's centre line -
+    yarn radius) over all elements and yarn segments, m (< 0: a fiber centre line inside a yarn)."""
+    ends = [(offsets[k], offsets[k + 1]) for k in range(len(offsets) - 1)]
+    idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in ends if hi - lo > 1] or
+                         [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+    if len(idx) == 0:
+        return math.inf
+    a, b, r = _yarn_segments(pts, offs, rad)
+    out = math.inf
+    for chunk in np.array_split(idx, max(1, len(idx) // 200)):
+        d = segment_distances(x[chunk], x[chunk + 1], a, b) - r[None, :]
+        out = min(out, float(d.min()))
+    return out
+
+
+def frame_fibers(columns: Mapping[str, Any]) -> tuple[Array, Array, Array]:
+    """Node positions of a dump frame ordered by fiber then node, with the fiber IDs (0-based)
+    and the offsets of each fiber's nodes."""
+    fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64) - 1
+    order = np.lexsort((np.rint(np.asarray(columns["f_beam[2]"])), fid))
+    x = np.stack([np.asarray(columns[c])[order] for c in ("x", "y", "z")], axis=1)
+    fids = fid[order]
+    present, counts = np.unique(fids, return_counts=True)
+    return x, present, np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def max_fiber_speed(columns: Mapping[str, Any]) -> float:
+    """Largest centre-of-mass speed of the fibers of a dump frame, m/s."""
+    fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64)
+    m = np.asarray(columns["mass"], dtype=float)
+    _, inv = np.unique(fid, return_inverse=True)
+    msum = np.bincount(inv, weights=m)
+    v = np.stack([np.bincount(inv, weights=m * np.asarray(columns[c])) for c in ("vx", "vy", "vz")], 1)
+    return float(np.max(np.linalg.norm(v / msum[:, None], axis=1)))
 
 
 def sheet_thickness(z: Array, diameter: float) -> float:
@@ -215,9 +328,23 @@ class Laydown(Stage):
     summary = "lay the generated fibers down on the fabric in the frozen flow (one-way coupling)"
     folder = "laydown"
     requires = ("domain", "fibers", "fabric", "flow", "laydown")
-    uses = ("seed", "domain", "fibers", "fiber_generation", "fabric", "flow", "fluid", "laydown")
+    uses = ("seed", "domain", "fibers", "fiber_generation", "fabric", "flow", "fluid", "laydown",
+            "contact")
     products = (H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME)
     code_version = 1
+
+    def execute(self, ctx: StageContext) -> Outcome:
+        out = super().execute(ctx)
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            settled = bool(h5["run"].attrs["settled"])
+        if not settled:
+            import sys
+
+            print(f"fiberform laydown: WARNING: the sheet did NOT settle within max_time_s "
+                  f"(see {self.product_paths(ctx)[3]})", file=sys.stderr)
+            return Outcome(out.stage, out.skipped, out.products, out.elapsed_s,
+                           out.message + ", NOT SETTLED")
+        return out
 
     def check_scene(self, scene: Scene) -> list[str]:
         problems = super().check_scene(scene)
@@ -225,6 +352,9 @@ class Laydown(Stage):
             return problems
         assert scene.laydown is not None and scene.domain is not None
         ld = scene.laydown
+        if scene.contact is not None and scene.contact.model != "fiber_dlvo":
+            problems.append("contact.model: the lay-down supports fiber_dlvo only (fiber-fiber "
+                            "contact of the fix fiber/beam fibers)")
         if removal_height(scene) <= scene.domain.lo_m[2]:
             problems.append("laydown.removal_height_m: must lie above domain.lo_m[2] (fibers "
                             "leaving the box would be lost)")
@@ -270,7 +400,11 @@ class Laydown(Stage):
             x0 = np.asarray(fh["fibers/x"][...], dtype=float)
         steps_per_check = max(1, round(ld.check_interval_s / ld.timestep_s))
         checks = max(1, math.ceil(ld.max_time_s / (steps_per_check * ld.timestep_s)))
-        (work / INPUT_NAME).write_text(build_input(scene, steps_per_check, checks))
+        with h5py.File(ctx.scene.output_path / FlowStage.folder / FlowStage.products[0], "r") as fh:
+            u_s = float(fh["flow_rate/superficial_velocity"][()])
+        v_settle = (ld.settle_speed_fraction * abs(u_s) if ld.settle_speed_fraction is not None
+                    else ld.settle_speed_m_s)
+        (work / INPUT_NAME).write_text(build_input(scene, steps_per_check, checks, v_settle))
         t0 = time.monotonic()
         try:
             run([str((ctx.build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log",
@@ -335,13 +469,27 @@ class Laydown(Stage):
                       "IDs of the removed fibers")
         write_dataset(a, "sheet_node_mass", m_nodes, "kg",
                       "sum of LIGGGHTS node masses left (cross-check of sheet_mass)")
+        clearances = np.array([element_clearance(*frame_fibers(fr.columns)[::2], pts, offs, rad)
+                               if len(fr.ids) else math.inf for fr in frames])
+        max_speeds = np.array([
+            float(np.max(np.linalg.norm(np.stack([fr.columns[c] for c in ("vx", "vy", "vz")], 1), axis=1)))
+            if len(fr.ids) else 0.0 for fr in frames])
+        fiber_speeds = np.array([max_fiber_speed(fr.columns) if len(fr.ids) else 0.0
+                                 for fr in frames])
+        measure = fiber_speeds if ld.settle_measure == "fiber" else max_speeds
         r = h5.create_group("run")
         r.attrs.update({
             "steps": int(steps_done), "simulated_time_s": steps_done * ld.timestep_s,
-            "settled": settled, "wall_time_s": wall, "steps_per_check": steps_per_check,
+            "settled": settled, "settle_speed_m_s": v_settle, "superficial_velocity_m_s": u_s,
+            "settle_checks": ld.settle_checks, "settle_measure": ld.settle_measure, "wall_time_s": wall, "steps_per_check": steps_per_check,
             "removal_height_m": removal_height(scene), "fabric_top_m": fabric_top,
-            "sheet_thickness_m": thickness, "grammage_kg_m2": m_sheet / area,
+            "sheet_thickness_m": thickness,
+            "min_element_clearance_m": float(clearances.min()) if len(clearances) else math.inf,
+            "grammage_kg_m2": m_sheet / area,
             "approximations": json_list(approximations(scene)),
+            "fiber_contact": ("pair_style fiber/dlvo " + " ".join(str(v) for v in pair_options(scene))
+                              if scene.contact is not None else "none"),
+            "walls": ld.walls,
         })
         snap = h5.create_group("snapshots")
         write_dataset(snap, "step", np.array([fr.step for fr in frames], dtype=np.int64), "1",
@@ -350,9 +498,13 @@ class Laydown(Stage):
             float(yarn_distances(np.stack([fr.columns[c] for c in ("x", "y", "z")], 1)[::1], pts, offs, rad).min())
             if len(fr.ids) else math.inf for fr in frames]), "m",
             "smallest node-to-yarn gap (distance to centreline - yarn radius) per snapshot")
-        write_dataset(snap, "max_speed", np.array([
-            float(np.max(np.linalg.norm(np.stack([fr.columns[c] for c in ("vx", "vy", "vz")], 1), axis=1)))
-            if len(fr.ids) else 0.0 for fr in frames]), "m/s", "largest node speed per snapshot")
+        write_dataset(snap, "min_element_clearance", clearances, "m",
+                      "smallest distance between a fiber element's centre line and a yarn "
+                      "centre line minus the yarn radius, per snapshot (< 0: fiber passes "
+                      "through a yarn)")
+        write_dataset(snap, "max_speed", max_speeds, "m/s", "largest node speed per snapshot")
+        write_dataset(snap, "max_fiber_speed", fiber_speeds, "m/s",
+                      "largest fiber centre-of-mass speed per snapshot")
 
         _write_vtu(tmp[VTU_NAME], xs, fid_s, offsets)
         _write_png(tmp[PNG_NAME], xs, offsets, pts, offs, rad,
@@ -367,13 +519,25 @@ class Laydown(Stage):
             f"- mass accounting: injected - (sheet + removed) = {m_inj - m_sheet - m_rem:.3g} kg "
             f"(by fiber IDs; LIGGGHTS node masses left {m_nodes:.6g} kg)",
             f"- simulated {steps_done * ld.timestep_s * 1e3:.3f} ms in {steps_done} steps of "
-            f"{ld.timestep_s:g} s; settled: {'yes' if settled else 'no (max_time_s reached)'} "
-            f"(criterion: max node speed < {ld.settle_speed_m_s:g} m/s at {ld.settle_checks} "
-            f"consecutive checks every {ld.check_interval_s:g} s)",
+            f"{ld.timestep_s:g} s; settled: "
+            f"{'yes' if settled else '**NO** (max_time_s reached before the criterion was met)'} "
+            f"(criterion: largest {ld.settle_measure} speed"
+            f"{' (centre of mass)' if ld.settle_measure == 'fiber' else ''} < {v_settle:.4g} m/s"
+            + (f" = {ld.settle_speed_fraction:g} x superficial velocity {u_s:.4g} m/s"
+               if ld.settle_speed_fraction is not None else "")
+            + f" at {ld.settle_checks} consecutive checks every {ld.check_interval_s:g} s; "
+            f"at the last checks: "
+            f"{', '.join(f'{v:.3g}' for v in measure[-ld.settle_checks:])} m/s; largest node "
+            f"speed at the end {max_speeds[-1]:.3g} m/s)",
             f"- sheet thickness estimate (5-95 % node heights + one width): {thickness * 1e6:.1f} um;"
             f" grammage {m_sheet / area * 1e3:.4g} g/m^2; fabric top at {fabric_top * 1e3:.3f} mm",
             f"- smallest node-to-yarn gap at the end: "
             f"{(gaps.min() if len(gaps) else math.inf) * 1e9:.3g} nm (>= 0: no node inside a yarn)",
+            f"- no fiber passes through a yarn: smallest element-to-yarn clearance (distance "
+            f"between the centre lines of a fiber element and a yarn segment minus the yarn "
+            f"radius) over all {len(frames)} snapshots: {clearances.min() * 1e6:.3f} um "
+            f"({'OK, >= 0' if clearances.min() >= 0 else 'VIOLATED'}; fiber radius "
+            f"{0.5 * f.width_m * 1e6:.1f} um)",
             f"- fiberdem wall time: {wall:.1f} s", "",
             "Approximations:", "", *[f"- {a}" for a in approximations(scene)], "",
             f"Pictures: `{PNG_NAME}`; ParaView: `{VTU_NAME}`; data: `{H5_NAME}`; log: "
@@ -396,12 +560,24 @@ def approximations(scene: Scene) -> list[str]:
         f"fix fiber/beam speed options: inertia_scale {ld.inertia_scale:g}, stiffness_scale "
         f"{ld.stiffness_scale:g} (EA and GA scaled: fibers are extensible/shear-soft)",
         "drag evaluated with the half-step velocity of velocity Verlet, per element at its centre",
-        "no fiber-fiber contact (fibers may overlap in the sheet); yarn and wall contact act on "
-        "the nodes only (node radius = max(a1, a2)), sub-stepped 1-D normal motion with the "
-        f"node's other forces held constant ({ld.contact_substeps} sub-steps), terms "
-        f"{','.join(ld.terms)}",
+        "yarn contact per fiber element (closest points of the element's and the yarn segment's "
+        "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
+        "node; radius max(a1, a2); sub-stepped 1-D normal motion of the contact point with the "
+        f"nodes' other forces held constant ({ld.contact_substeps} sub-steps), terms "
+        f"{','.join(ld.terms)}; Coulomb friction {ld.friction_coefficient:g} on yarns and "
+        "planes (velocity-level stick/slip in fix fiber/yarns; not part of the thesis' law)",
         "fibers are removed whole when any node passes the removal height",
     ]
+    c = scene.contact
+    if c is None:
+        out.append("no fiber-fiber contact (fibers may overlap in the sheet)")
+    else:
+        out.append("fiber-fiber contact: pair_style fiber/dlvo " +
+                   " ".join(str(v) for v in pair_options(scene)) +
+                   " (points 'auto' unless given; steric_length_m not passed: law defaults)")
     if ld.walls == "wall_fiber_dlvo":
         out.append("side walls: fix wall/fiber/dlvo (contact developers' fix)")
+    elif ld.walls == "wall_gran":
+        out.append("side walls: stock LIGGGHTS fix wall/gran, model hertz, tangential no_history, "
+                   "E 1e7 Pa, nu 0.3, restitution 0.5, friction 0 (comparison option)")
     return out
