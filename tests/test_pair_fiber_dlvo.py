@@ -59,6 +59,27 @@ def _fiberdem() -> Path:
     return exe
 
 
+def _thermo(log: str, columns: list[str]) -> dict[str, np.ndarray]:
+    """Thermo rows of a LIGGGHTS log (between a "Step Time ..." header and "Loop time"), as
+    columns named by `columns` (LIGGGHTS abbreviates long header names, so the caller names them)."""
+    rows, on = [], False
+    for line in log.splitlines():
+        if line.split()[:2] == ["Step", "Time"]:
+            on = True
+            continue
+        if on and line.startswith("Loop time"):
+            on = False
+            continue
+        if on:
+            try:
+                rows.append([float(w) for w in line.split()])
+            except ValueError:
+                pass
+    assert rows, f"no thermo output:\n{log[-2000:]}"
+    data = np.array(rows)
+    return {c: data[:, i] for i, c in enumerate(columns)}
+
+
 def _run(workdir: Path, ranks: int = 1, length: float = L, example: Path = EXAMPLE,
          **var: str) -> dict[str, np.ndarray]:
     workdir.mkdir(parents=True, exist_ok=True)
@@ -74,23 +95,8 @@ def _run(workdir: Path, ranks: int = 1, length: float = L, example: Path = EXAMP
     res = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, errors="replace", timeout=600)
     log = (workdir / "log.fiberdem").read_text() if (workdir / "log.fiberdem").exists() else ""
     assert res.returncode == 0, f"fiberdem failed:\n{res.stdout[-2000:]}\n{res.stderr[-2000:]}\n{log[-2000:]}"
-    rows, cols, on = [], None, False
-    for line in log.splitlines():
-        if line.split()[:2] == ["Step", "Time"]:
-            # LIGGGHTS abbreviates the header; the order is fixed by in.fiber_collision
-            cols, on = COLUMNS, True
-            continue
-        if on and line.startswith("Loop time"):
-            on = False
-            continue
-        if on:
-            try:
-                rows.append([float(w) for w in line.split()])
-            except ValueError:
-                pass
-    assert cols and rows, f"no thermo output:\n{log[-2000:]}"
-    data = np.array(rows)
-    out = {c: data[:, i] for i, c in enumerate(cols)}
+    # LIGGGHTS abbreviates the header; the column order is fixed by in.fiber_collision
+    out = _thermo(log, COLUMNS)
     out["dump"] = np.loadtxt(workdir / var.get("dump", "final.dump"), skiprows=9)
     return out
 
@@ -211,21 +217,7 @@ def _run_wall(workdir: Path, **var) -> dict[str, np.ndarray]:
     res = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, errors="replace", timeout=600)
     log = (workdir / "log").read_text()
     assert res.returncode == 0, log[-2000:]
-    rows, on = [], False
-    for line in log.splitlines():
-        if line.split()[:2] == ["Step", "Time"]:
-            on = True
-            continue
-        if on and line.startswith("Loop time"):
-            on = False
-            continue
-        if on:
-            try:
-                rows.append([float(w) for w in line.split()])
-            except ValueError:
-                pass
-    data = np.array(rows)
-    return {c: data[:, i] for i, c in enumerate(["step", "time", "zlo", "zhi", "vz", "kin", "solves", "psolves"])}
+    return _thermo(log, ["step", "time", "zlo", "zhi", "vz", "kin", "solves", "psolves"])
 
 
 def test_wall_bounce_steric_only(tmp_path):
