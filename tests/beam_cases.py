@@ -116,7 +116,7 @@ def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
     cmd = [exe, "-in", "in.case", "-log", "log.case", "-screen", "none"]
     if ranks > 1:
         cmd = ["mpirun", "-np", str(ranks), *cmd]
-    proc = subprocess.run(cmd, cwd=work, env=ENV, capture_output=True, text=True, errors="replace", timeout=900,
+    proc = subprocess.run(cmd, cwd=work, env=ENV, capture_output=True, text=True, timeout=900,
                           errors="replace")
     log = ((work / "log.case").read_text(errors="replace") if (work / "log.case").exists()
            else "")

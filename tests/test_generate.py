@@ -226,7 +226,7 @@ def test_cli_generate_then_fiberdem_loads(tmp_path: Path, build_dir: Path,
     assert abs(total - 1e-9) <= masses.max()
     # fiberdem loads the fibers with fix fiber/beam
     q = subprocess.run([str(exe), "-in", "in.fibers", "-log", "log.fiberdem"], cwd=out, env=env,
-                       capture_output=True, text=True, errors="replace", timeout=300, errors="replace")
+                       capture_output=True, text=True, errors="replace", timeout=300)
     assert q.returncode == 0, q.stdout[-2000:]
     log = (out / "log.fiberdem").read_text()
     assert f"fix fiber/beam: {len(masses)} fibers" in log
