@@ -2,6 +2,8 @@
    fix fiber/beam: see fix_fiber_beam.h, docs/styles/fix_fiber_beam.md and docs/models/beam.md. */
 #include "fix_fiber_beam.h"
 
+#include "style_args.h"
+
 #include <mpi.h>
 
 #include <cmath>
@@ -27,12 +29,6 @@
 using namespace LAMMPS_NS;
 using namespace FixConst;
 
-char FixFiberBeam::errmsg_[1024];
-
-const char *FixFiberBeam::errtext(const std::string &s) {
-  std::snprintf(errmsg_, sizeof errmsg_, "%s", s.c_str());
-  return errmsg_;
-}
 namespace bm = fiberform::physics::beam;
 
 namespace {
@@ -77,14 +73,14 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     if (iarg + n >= narg) {
       const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' needs " + std::to_string(n) +
                             " value(s)";
-      error->all(FLERR, errtext(m));
+      error->all(FLERR, fiberform::error_text(m));
     }
   };
   auto positive = [&](double v, const char *kw, bool allow_zero) {
     if (!std::isfinite(v) || v < 0 || (!allow_zero && v == 0)) {
       const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' must be a finite number " +
                             (allow_zero ? ">= 0" : "> 0");
-      error->all(FLERR, errtext(m));
+      error->all(FLERR, fiberform::error_text(m));
     }
     return v;
   };
@@ -146,7 +142,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
                             "' (expected nodes, E, G, density, shear_factor, damping, drag, "
                             "stiffness_scale, inertia_scale, torque, dt_check)";
-      error->all(FLERR, errtext(m));
+      error->all(FLERR, fiberform::error_text(m));
     }
   }
   if (!haveE || !haveG || !haveRho)
@@ -267,7 +263,7 @@ void FixFiberBeam::read_nodes_file(const char *path) {
   MPI_Bcast(&status, 1, MPI_INT, 0, world);
   if (status) {
     const std::string m = "fix fiber/beam: " + why;
-    error->one(FLERR, errtext(m));
+    error->one(FLERR, fiberform::error_text(m));
   }
   long n = static_cast<long>(rec.size());
   MPI_Bcast(&n, 1, MPI_LONG, 0, world);
@@ -300,7 +296,7 @@ void FixFiberBeam::read_nodes_file(const char *path) {
   if (total != nrow) {
     const std::string m = "fix fiber/beam: nodes file lists " + std::to_string(nrow) + " nodes but only " +
                           std::to_string(total) + " of those atom IDs exist";
-    error->all(FLERR, errtext(m));
+    error->all(FLERR, fiberform::error_text(m));
   }
   ref_done_ = 0;
 }
@@ -323,7 +319,7 @@ void FixFiberBeam::init() {
       const std::string m = std::string("fix fiber/beam integrates its nodes itself; fix ") + other->id +
                             " (" + other->style + ") also integrates some of them. Apply it to a group "
                             "without fiber nodes.";
-      error->all(FLERR, errtext(m));
+      error->all(FLERR, fiberform::error_text(m));
     }
   }
 }
@@ -424,7 +420,7 @@ void FixFiberBeam::compute_reference() {
   if (badall) {
     const std::string m = "fix fiber/beam: " + std::to_string(badall) +
                           " atoms of the fix group have no entry in the nodes file";
-    error->all(FLERR, errtext(m));
+    error->all(FLERR, fiberform::error_text(m));
   }
   ref_done_ = 1;
 }
@@ -485,8 +481,8 @@ void FixFiberBeam::compute_critical_steps(bool print) {
                   "Reduce the timestep, or trade accuracy for speed with stiffness_scale (axial/shear) or "
                   "inertia_scale (rotary inertia), see docs/styles/fix_fiber_beam.md",
                   update->dt, mn, names[which]);
-    if (dt_check_error_) error->all(FLERR, errtext(buf));
-    else error->warning(FLERR, errtext(buf));
+    if (dt_check_error_) error->all(FLERR, fiberform::error_text(buf));
+    else error->warning(FLERR, fiberform::error_text(buf));
   }
 }
 

@@ -105,10 +105,6 @@ class FixFiberBeam : public Fix {
   double torque_[3] = {0, 0, 0};
   bool dt_check_error_ = true;
   std::string nodes_path_;
-  // Error text handed to LIGGGHTS' Error, which prints it again after exit() has run static
-  // destructors: plain static char storage (no destructor) keeps it valid.
-  static char errmsg_[1024];
-  static const char *errtext(const std::string &s);
 
   int ref_done_ = 0;
   int comm_mode_ = 0;  // 0: dynamic (q, v, omega), 1: static (columns 0..NSTATIC-1)

@@ -2,6 +2,8 @@
    fix fiber/drag: see fix_fiber_drag.h and docs/styles/fix_fiber_drag.md. */
 #include "fix_fiber_drag.h"
 
+#include "style_args.h"
+
 #include <mpi.h>
 
 #include <cmath>
@@ -22,26 +24,6 @@ using namespace FixConst;
 namespace drag = fiberform::physics::drag;
 namespace flow = fiberform::physics::flow;
 
-namespace {
-
-// Error text handed to LIGGGHTS' Error must outlive exit(): static storage, no destructor.
-char g_errmsg[1024];
-const char *errtext(const std::string &s) {
-  std::snprintf(g_errmsg, sizeof g_errmsg, "%s", s.c_str());
-  return g_errmsg;
-}
-
-double number(Error *error, const char *keyword, const char *text) {
-  char *end = nullptr;
-  const double v = std::strtod(text, &end);
-  if (end == text || *end != '\0' || !std::isfinite(v))
-    error->all(FLERR, errtext(std::string("fix fiber/drag: ") + keyword + ": '" + text +
-                              "' is not a finite number"));
-  return v;
-}
-
-}  // namespace
-
 FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
   vector_flag = 1;
   size_vector = 7;
@@ -52,15 +34,15 @@ FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     const std::string kw = arg[iarg];
     auto need = [&](int n) {
       if (iarg + n >= narg)
-        error->all(FLERR, errtext("fix fiber/drag: " + kw + " needs " + std::to_string(n) + " value(s)"));
+        error->all(FLERR, fiberform::error_text("fix fiber/drag: " + kw + " needs " + std::to_string(n) + " value(s)"));
     };
     if (kw == "flow") {
       need(1);
       const std::string kind = arg[iarg + 1];
       if (kind == "uniform") {
         need(4);
-        flow::Vec3 u{number(error, "flow uniform", arg[iarg + 2]), number(error, "flow uniform", arg[iarg + 3]),
-                     number(error, "flow uniform", arg[iarg + 4])};
+        flow::Vec3 u{fiberform::parse_finite(error, "fix fiber/drag", "flow uniform", arg[iarg + 2]), fiberform::parse_finite(error, "fix fiber/drag", "flow uniform", arg[iarg + 3]),
+                     fiberform::parse_finite(error, "fix fiber/drag", "flow uniform", arg[iarg + 4])};
         flow_ = std::make_unique<flow::UniformFlow>(u);
         iarg += 5;
       } else if (kind == "grid") {
@@ -68,26 +50,26 @@ FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
         try {
           flow_ = std::make_unique<flow::GridFlow>(flow::read_flow_grid(arg[iarg + 2]));
         } catch (const std::exception &e) {
-          error->all(FLERR, errtext(std::string("fix fiber/drag: flow grid: ") + e.what()));
+          error->all(FLERR, fiberform::error_text(std::string("fix fiber/drag: flow grid: ") + e.what()));
         }
         iarg += 3;
       } else {
-        error->all(FLERR, errtext("fix fiber/drag: flow: expected 'uniform ux uy uz' or 'grid FILE', got '" +
+        error->all(FLERR, fiberform::error_text("fix fiber/drag: flow: expected 'uniform ux uy uz' or 'grid FILE', got '" +
                                   kind + "'"));
       }
     } else if (kw == "fluid_density") {
       need(1);
-      rho_f_ = number(error, "fluid_density", arg[iarg + 1]);
+      rho_f_ = fiberform::parse_finite(error, "fix fiber/drag", "fluid_density", arg[iarg + 1]);
       if (!(rho_f_ >= 0.0)) error->all(FLERR, "fix fiber/drag: fluid_density must be >= 0");
       iarg += 2;
     } else if (kw == "viscosity") {
       need(1);
-      mu_ = number(error, "viscosity", arg[iarg + 1]);
+      mu_ = fiberform::parse_finite(error, "fix fiber/drag", "viscosity", arg[iarg + 1]);
       if (!(mu_ > 0.0)) error->all(FLERR, "fix fiber/drag: viscosity must be > 0");
       iarg += 2;
     } else if (kw == "gravity") {
       need(3);
-      for (int k = 0; k < 3; ++k) g_[k] = number(error, "gravity", arg[iarg + 1 + k]);
+      for (int k = 0; k < 3; ++k) g_[k] = fiberform::parse_finite(error, "fix fiber/drag", "gravity", arg[iarg + 1 + k]);
       iarg += 4;
     } else if (kw == "drag") {
       need(1);
@@ -96,7 +78,7 @@ FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       drag_on_ = v == "yes";
       iarg += 2;
     } else {
-      error->all(FLERR, errtext("fix fiber/drag: unknown keyword '" + kw +
+      error->all(FLERR, fiberform::error_text("fix fiber/drag: unknown keyword '" + kw +
                                 "' (flow, fluid_density, viscosity, gravity, drag)"));
     }
   }

@@ -2,6 +2,8 @@
    fix fiber/yarns: see fix_fiber_yarns.h and docs/styles/fix_fiber_yarns.md. */
 #include "fix_fiber_yarns.h"
 
+#include "style_args.h"
+
 #include <mpi.h>
 
 #include <algorithm>
@@ -27,20 +29,6 @@ using namespace FixConst;
 namespace phys = fiberform::physics;
 
 namespace {
-
-char g_errmsg[1024];
-const char *errtext(const std::string &s) {
-  std::snprintf(g_errmsg, sizeof g_errmsg, "%s", s.c_str());
-  return g_errmsg;
-}
-
-double number(Error *error, const std::string &keyword, const char *text) {
-  char *end = nullptr;
-  const double v = std::strtod(text, &end);
-  if (end == text || *end != '\0' || !std::isfinite(v))
-    error->all(FLERR, errtext("fix fiber/yarns: " + keyword + ": '" + text + "' is not a finite number"));
-  return v;
-}
 
 // closest point of segment a-b to p: returns the parameter in [0, 1]
 double closest_param(const std::array<double, 3> &a, const std::array<double, 3> &b, const double *p) {
@@ -93,9 +81,9 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
     const std::string kw = arg[iarg];
     auto need = [&](int n) {
       if (iarg + n >= narg)
-        error->all(FLERR, errtext("fix fiber/yarns: " + kw + " needs " + std::to_string(n) + " value(s)"));
+        error->all(FLERR, fiberform::error_text("fix fiber/yarns: " + kw + " needs " + std::to_string(n) + " value(s)"));
     };
-    auto val = [&](int k) { return number(error, kw, arg[iarg + k]); };
+    auto val = [&](int k) { return fiberform::parse_finite(error, "fix fiber/yarns", kw, arg[iarg + k]); };
     if (kw == "yarns") {
       need(1);
       read_yarns(arg[iarg + 1]);
@@ -150,7 +138,7 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
         if (item == "vdw") t |= phys::kVdw;
         else if (item == "es") t |= phys::kEs;
         else if (item == "steric") t |= phys::kSteric;
-        else if (item != "none") error->all(FLERR, errtext("fix fiber/yarns: terms: unknown term '" + item + "'"));
+        else if (item != "none") error->all(FLERR, fiberform::error_text("fix fiber/yarns: terms: unknown term '" + item + "'"));
       }
       law_.terms = t;
       iarg += 2;
@@ -165,7 +153,7 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
     else if (kw == "h_S") { need(1); law_.steric.h_S = val(1); iarg += 2; }
     else if (kw == "t_R") { need(1); law_.steric.t_R = val(1); iarg += 2; }
     else {
-      error->all(FLERR, errtext("fix fiber/yarns: unknown keyword '" + kw + "'"));
+      error->all(FLERR, fiberform::error_text("fix fiber/yarns: unknown keyword '" + kw + "'"));
     }
   }
   if (!(law_.steric.h_R > 0.0 && law_.steric.h_R < law_.h0))
@@ -180,7 +168,7 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
 
 void FixFiberYarns::read_yarns(const char *path) {
   std::ifstream in(path);
-  if (!in) error->all(FLERR, errtext(std::string("fix fiber/yarns: cannot open yarns file ") + path));
+  if (!in) error->all(FLERR, fiberform::error_text(std::string("fix fiber/yarns: cannot open yarns file ") + path));
   std::string line;
   int prev_yarn = -1;
   std::array<double, 3> prev{0, 0, 0};
@@ -196,7 +184,7 @@ void FixFiberYarns::read_yarns(const char *path) {
     double r;
     if (!(ls >> yarn)) continue;
     if (!(ls >> p[0] >> p[1] >> p[2] >> r) || !(r > 0.0))
-      error->all(FLERR, errtext(std::string(path) + ":" + std::to_string(lineno) +
+      error->all(FLERR, fiberform::error_text(std::string(path) + ":" + std::to_string(lineno) +
                                 ": expected 'yarn-index x y z radius' with radius > 0"));
     if (yarn == prev_yarn) {
       Segment sg{prev, p, 0.5 * (prev_r + r), yarn, {0, 0, 0}, 0.0};
@@ -212,7 +200,7 @@ void FixFiberYarns::read_yarns(const char *path) {
     prev = p;
     prev_r = r;
   }
-  if (segs_.empty()) error->all(FLERR, errtext(std::string("fix fiber/yarns: no yarn segments in ") + path));
+  if (segs_.empty()) error->all(FLERR, fiberform::error_text(std::string("fix fiber/yarns: no yarn segments in ") + path));
 }
 
 // Bins of segment capsules (radius + reach), so that a node looks at the few segments near it.

@@ -1,0 +1,27 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+#include "style_args.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include "error.h"
+
+namespace fiberform {
+
+const char *error_text(const std::string &message) {
+  static char buffer[1024];
+  std::snprintf(buffer, sizeof buffer, "%s", message.c_str());
+  return buffer;
+}
+
+double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std::string &keyword,
+                    const char *text) {
+  char *end = nullptr;
+  const double v = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(v))
+    error->all(FLERR, error_text(style + ": " + keyword + ": '" + text + "' is not a finite number"));
+  return v;
+}
+
+}  // namespace fiberform

@@ -1,0 +1,27 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   fiberform: helpers shared by the project's styles for argument checking and error messages. */
+#ifndef FIBERFORM_STYLE_ARGS_H
+#define FIBERFORM_STYLE_ARGS_H
+
+#include <string>
+
+namespace LAMMPS_NS {
+class Error;
+}
+
+namespace fiberform {
+
+// LIGGGHTS 3.8's Error::all() prints its message a second time after exit() has run static
+// destructors, so a message held in a std::string (even a static one) comes out as garbage.
+// This copies the message into plain static char storage (no destructor) and returns it; the
+// next call overwrites it, which is fine because Error::all() does not return.
+const char *error_text(const std::string &message);
+
+// A finite number from an input-script word, or error->all() naming the style and keyword:
+// "<style>: <keyword>: '<text>' is not a finite number".
+double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std::string &keyword,
+                    const char *text);
+
+}  // namespace fiberform
+
+#endif
