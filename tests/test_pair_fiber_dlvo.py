@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fiberform.liggghts_log import thermo_rows
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "liggghts-fiber-style" / "examples" / "in.fiber_collision"
 
@@ -62,19 +64,7 @@ def _fiberdem() -> Path:
 def _thermo(log: str, columns: list[str]) -> dict[str, np.ndarray]:
     """Thermo rows of a LIGGGHTS log (between a "Step Time ..." header and "Loop time"), as
     columns named by `columns` (LIGGGHTS abbreviates long header names, so the caller names them)."""
-    rows, on = [], False
-    for line in log.splitlines():
-        if line.split()[:2] == ["Step", "Time"]:
-            on = True
-            continue
-        if on and line.startswith("Loop time"):
-            on = False
-            continue
-        if on:
-            try:
-                rows.append([float(w) for w in line.split()])
-            except ValueError:
-                pass
+    rows = thermo_rows(log)
     assert rows, f"no thermo output:\n{log[-2000:]}"
     data = np.array(rows)
     return {c: data[:, i] for i, c in enumerate(columns)}

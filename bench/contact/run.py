@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fiberform.liggghts_log import thermo_rows
+
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "liggghts-fiber-style" / "examples" / "in.fiber_collision"
 L, D = 2.0e-5, 1.4e-5
@@ -97,18 +99,7 @@ def run(exe: Path, case: str, integ: str, dt: float, extra: str = "") -> dict:
     res = {"case": case, "integrator": integ, "dt": dt, "extra": extra, "wall_s": wall, "ok": False}
     m = re.search(r"Loop time of ([0-9.eE+-]+)", log)
     res["loop_s"] = float(m.group(1)) if m else float("nan")
-    rows, on = [], False
-    for line in log.splitlines():
-        if line.split()[:2] == ["Step", "Time"]:
-            on = True
-            continue
-        if on and line.startswith("Loop time"):
-            break
-        if on:
-            try:
-                rows.append([float(w) for w in line.split()])
-            except ValueError:
-                pass
+    rows = thermo_rows(log)
     if r.returncode != 0 or not rows:
         return res
     a = np.array(rows)
