@@ -74,6 +74,7 @@ class Case:
     E: float = E_WALL
     G: float = G_WALL
     rho: float = RHO
+    integrator: str = "explicit"  # fix fiber/beam integrator: "explicit" or "implicit"
 
 
 @dataclass
@@ -86,6 +87,8 @@ class Result:
 
 def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
              pre_fix: Sequence[str] = ()) -> Result:
+    if case.integrator not in ("explicit", "implicit"):
+        raise ValueError(f"Case.integrator must be 'explicit' or 'implicit', not {case.integrator!r}")
     work.mkdir(parents=True, exist_ok=True)
     write_fibers_liggghts(work / "data.fib", work / "nodes.fib", case.fibers, case.box_lo,
                           case.box_hi, density_kg_m3=case.rho)
@@ -95,7 +98,7 @@ def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
         "newton off", "communicate single vel yes", f"processors {case.processors}",
         "read_data data.fib", f"neighbor {skin!r} bin", "neigh_modify delay 0", *pre_fix,
         f"fix beam all fiber/beam nodes nodes.fib E {case.E!r} G {case.G!r} density {case.rho!r} "
-        f"shear_factor {KSHEAR!r} {case.fix_options}",
+        f"shear_factor {KSHEAR!r} integrator {case.integrator} {case.fix_options}",
         *case.commands,
         f"timestep {case.dt!r}",
         "thermo_style custom step f_beam[1] f_beam[4]",
@@ -149,6 +152,27 @@ def _read_thermo(log: str) -> np.ndarray:
             else:
                 on = False
     return np.array(rows)
+
+
+def eb_mode1(s: np.ndarray, L: float) -> tuple[np.ndarray, np.ndarray]:
+    """First mode shape (and slope) of an Euler-Bernoulli cantilever clamped at s = 0, beta1 L =
+    1.8751: the textbook closed form (e.g. Meirovitch, Fundamentals of Vibrations, sec. 8.7)."""
+    bl = 1.8751040687
+    b = bl / L
+    sig = (math.cosh(bl) + math.cos(bl)) / (math.sinh(bl) + math.sin(bl))
+    phi = np.cosh(b * s) - np.cos(b * s) - sig * (np.sinh(b * s) - np.sin(b * s))
+    dphi = b * (np.sinh(b * s) + np.sin(b * s) - sig * (np.cosh(b * s) - np.cos(b * s)))
+    return phi, dphi
+
+
+def period_from_crossings(t: np.ndarray, y: np.ndarray) -> tuple[float, int]:
+    """Mean period of an oscillating signal from its linearly interpolated zero crossings; returns
+    (period, number of crossings); nan if fewer than 3 crossings."""
+    idx = np.nonzero(np.sign(y[:-1]) != np.sign(y[1:]))[0]
+    cr = t[idx] - y[idx] * (t[idx + 1] - t[idx]) / (y[idx + 1] - y[idx])
+    if len(cr) < 3:
+        return math.nan, len(cr)
+    return 2 * (cr[-1] - cr[0]) / (len(cr) - 1), len(cr)
 
 
 def critical_steps(log: str) -> dict[str, float]:

@@ -24,6 +24,8 @@ from beam_cases import (  # noqa: E402
     Case,
     bent_state,
     critical_steps,
+    eb_mode1,
+    period_from_crossings,
     ellipse_section,
     run_case,
     straight_chain,
@@ -152,15 +154,6 @@ def test_cantilever_large_tip_load_elastica(fiberdem_build: Path, tmp_path: Path
 # dynamics
 
 
-def eb_mode1(s: np.ndarray, L: float) -> tuple[np.ndarray, np.ndarray]:
-    bl = 1.8751040687
-    b = bl / L
-    sig = (math.cosh(bl) + math.cos(bl)) / (math.sinh(bl) + math.sin(bl))
-    phi = np.cosh(b * s) - np.cos(b * s) - sig * (np.sinh(b * s) - np.sin(b * s))
-    dphi = b * (np.sinh(b * s) + np.sin(b * s) - sig * (np.cosh(b * s) - np.cos(b * s)))
-    return phi, dphi
-
-
 def test_first_bending_frequency(fiberdem_build: Path, tmp_path: Path) -> None:
     """Undamped cantilever started in the Euler-Bernoulli first mode shape: frequency vs
     (beta1 L)^2 / L^2 sqrt(E I / (rho A)), beta1 L = 1.8751, within 3%. Real rotary inertia."""
@@ -181,10 +174,8 @@ def test_first_bending_frequency(fiberdem_build: Path, tmp_path: Path) -> None:
     r = run_case(fiberdem_build, tmp_path, case)
     y = r.track[:, 1]
     t = np.arange(1, len(y) + 1) * 5 * dt
-    idx = np.nonzero(np.sign(y[:-1]) != np.sign(y[1:]))[0]
-    crossings = t[idx] - y[idx] * (t[idx + 1] - t[idx]) / (y[idx + 1] - y[idx])
-    assert len(crossings) >= 6
-    measured_period = 2 * (crossings[-1] - crossings[0]) / (len(crossings) - 1)
+    measured_period, ncross = period_from_crossings(t, y)
+    assert ncross >= 6
     assert 2 * math.pi / measured_period == pytest.approx(om, rel=0.03)
 
 

@@ -44,6 +44,9 @@ struct EngineConfig {
   double h_match = 1e-9;            // m, gap at which auto points match parallel cylinders
   bool self_contact = false;        // non-adjacent elements of the same fiber
   int frozen_groupbit = 0;          // atoms of this group have infinite mass
+  // implicit fiber/beam only: which averaged force the implicit step receives (fiber_contact_fix.h):
+  // position landing with the external loads as a0 (default), or the impulse with every force as a0
+  bool implicit_impulse = false;
 };
 
 struct EngineStats {

@@ -9,6 +9,7 @@
 #include "atom.h"
 #include "comm.h"
 #include "error.h"
+#include "fix_fiber_beam.h"
 #include "fix.h"
 #include "force.h"
 #include "memory.h"
@@ -51,6 +52,44 @@ void FiberContactFix::init() {
   if (!engine_) error->all(FLERR, "fiber contact fix without an engine");
   engine_->init();
   reach_ = interaction_reach();
+  beam_ = FixFiberBeam::find(lmp);
+}
+
+bool FiberContactFix::implicit_beam() const { return beam_ && beam_->implicit(); }
+
+// Sub-integrates every interacting pair from the current state (a0 from f) and sums the averaged
+// forces of all contact points into fpre_/fpost_/tpre_/tpost_b_ of the local atoms.
+void FiberContactFix::subintegrate_all() {
+  prepare(true);
+  const int nall = atom->nlocal + atom->nghost;
+  for (int i = 0; i < nall; ++i)
+    for (int k = 0; k < 3; ++k) fpre_[i][k] = fpost_[i][k] = tpre_[i][k] = tpost_b_[i][k] = 0.0;
+  const bool torques = atom->torque_flag;
+  accumulate(true, {vbuf_, acc_, share_}, {fpre_, fpost_, torques ? tpre_ : nullptr, torques ? tpost_b_ : nullptr});
+  comm->reverse_comm_fix(this);
+}
+
+void FiberContactFix::solve_implicit() {
+  for (int i = 0; i < atom->nlocal; ++i)
+    for (int k = 0; k < 3; ++k) cpost_[i][k] = tpost_[i][k] = 0.0;
+  subintegrate_all();
+  const bool torques = atom->torque_flag;
+  double **f = atom->f, **t = atom->torque;
+  if (engine_->cfg.implicit_impulse) {
+    // the impulse average m w(dt)/dt (momentum exact); torques from the same points' pre forces
+    for (int i = 0; i < atom->nlocal; ++i)
+      for (int k = 0; k < 3; ++k) {
+        f[i][k] += fpost_[i][k];
+        if (torques) t[i][k] += tpre_[i][k];
+      }
+    return;
+  }
+  const double c = 0.5 / beam_->beta_eff();  // F_pos = 2 m y / dt^2  ->  m y / (beta_eff dt^2)
+  for (int i = 0; i < atom->nlocal; ++i)
+    for (int k = 0; k < 3; ++k) {
+      f[i][k] += c * fpre_[i][k];
+      if (torques) t[i][k] += c * tpre_[i][k];
+    }
 }
 
 double FiberContactFix::extend_cut_ghost() {
@@ -78,22 +117,22 @@ void FiberContactFix::prepare(bool with_acc) {
   double **v = atom->v, **f = atom->f;
   double *rmass = atom->rmass;
   engine_->compute_shares(share_);
-  for (int i = 0; i < nlocal; ++i)
+  // implicit fibers, position landing: a0 from the external loads only (the internal force of a
+  // stiff fiber at a contact node is mostly the unresolved elastic reaction to the last contact push)
+  const bool external_only = with_acc && implicit_beam() && !engine_->cfg.implicit_impulse;
+  for (int i = 0; i < nlocal; ++i) {
+    const double *fint = external_only && beam_->is_node(i) ? beam_->internal_force(i) : nullptr;
     for (int k = 0; k < 3; ++k) {
       vbuf_[i][k] = v[i][k];
-      acc_[i][k] = with_acc ? (f[i][k] - cpost_[i][k]) / rmass[i] : 0.0;
+      acc_[i][k] = with_acc ? (f[i][k] - cpost_[i][k] - (fint ? fint[k] : 0.0)) / rmass[i] : 0.0;
     }
+  }
   comm->forward_comm_fix(this);
 }
 
 void FiberContactFix::solve_step() {
-  prepare(true);
-  const int nall = atom->nlocal + atom->nghost;
-  for (int i = 0; i < nall; ++i)
-    for (int k = 0; k < 3; ++k) fpre_[i][k] = fpost_[i][k] = tpre_[i][k] = tpost_b_[i][k] = 0.0;
+  subintegrate_all();
   const bool torques = atom->torque_flag;
-  accumulate(true, {vbuf_, acc_, share_}, {fpre_, fpost_, torques ? tpre_ : nullptr, torques ? tpost_b_ : nullptr});
-  comm->reverse_comm_fix(this);
   double **f = atom->f;
   double **t = atom->torque;
   for (int i = 0; i < atom->nlocal; ++i) {
@@ -116,6 +155,10 @@ void FiberContactFix::pre_force(int) {
 }
 
 void FiberContactFix::setup(int vflag) {
+  if (subintegrating() && implicit_beam()) {
+    solve_implicit();
+    return;
+  }
   if (!subintegrating()) {
     post_force(vflag);
     return;
@@ -127,11 +170,36 @@ void FiberContactFix::setup(int vflag) {
 }
 
 void FiberContactFix::end_of_step() {
-  if (subintegrating()) solve_step();
+  if (!subintegrating()) return;
+  if (!implicit_beam()) {
+    solve_step();
+    return;
+  }
+  // implicit: the constant force F = F_pos/(2 beta_eff) landed the points on the ODE end
+  // positions but changed their velocities by gamma_eff dt F/m; land them on the ODE end velocities
+  // as well (impulse F_vel dt): v += dt/m (F_vel - gamma_eff F), and take F out of the scheme's
+  // acceleration history (else its impulse would be delivered again over the next steps).
+  if (engine_->cfg.implicit_impulse) return;
+  const double c = 0.5 / beam_->beta_eff(), g = beam_->gamma_eff();
+  const double dt = update->dt;
+  double **v = atom->v;
+  for (int i = 0; i < atom->nlocal; ++i) {
+    const double k = dt / atom->rmass[i];
+    double F[3];
+    for (int d = 0; d < 3; ++d) {
+      F[d] = c * fpre_[i][d];
+      v[i][d] += k * (fpost_[i][d] - g * F[d]);
+    }
+    beam_->remove_from_history(i, F);
+  }
 }
 
 void FiberContactFix::post_force(int) {
   double **f = atom->f;
+  if (subintegrating() && implicit_beam()) {
+    solve_implicit();
+    return;
+  }
   if (subintegrating()) {
     double **t = atom->torque;
     for (int i = 0; i < atom->nlocal; ++i)

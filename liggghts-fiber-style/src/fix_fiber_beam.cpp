@@ -24,12 +24,14 @@
 #include "memory.h"
 #include "modify.h"
 #include "physics/beam.h"
+#include "physics/implicit_rod.h"
 #include "update.h"
 
 using namespace LAMMPS_NS;
 using namespace FixConst;
 
 namespace bm = fiberform::physics::beam;
+namespace rod = fiberform::physics::rod;
 
 namespace {
 
@@ -63,7 +65,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
   scalar_flag = 1;
   extscalar = 1;
   vector_flag = 1;
-  size_vector = 13;
+  size_vector = 17;
   extvector = 0;
   global_freq = 1;
   comm_forward = NSTATIC > kDynamicComm ? NSTATIC : kDynamicComm;
@@ -132,6 +134,39 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       torque_groupbit_ = group->bitmask[ig];
       for (int k = 0; k < 3; ++k) torque_[k] = force->numeric(FLERR, arg[iarg + 2 + k]);
       iarg += 5;
+    } else if (std::strcmp(kw, "integrator") == 0) {
+      need(iarg, 1, kw);
+      if (std::strcmp(arg[iarg + 1], "implicit") == 0) implicit_ = true;
+      else if (std::strcmp(arg[iarg + 1], "explicit") == 0) implicit_ = false;
+      else error->all(FLERR, "fix fiber/beam: keyword 'integrator' takes 'implicit' or 'explicit'");
+      iarg += 2;
+    } else if (std::strcmp(kw, "rho_inf") == 0) {
+      need(iarg, 1, kw);
+      rho_inf_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, true);
+      if (rho_inf_ > 1.0) error->all(FLERR, "fix fiber/beam: keyword 'rho_inf' must be in [0, 1]");
+      iarg += 2;
+    } else if (std::strcmp(kw, "newton_tol") == 0) {
+      need(iarg, 1, kw);
+      newton_tol_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
+      iarg += 2;
+    } else if (std::strcmp(kw, "newton_max") == 0) {
+      need(iarg, 1, kw);
+      newton_max_ = force->inumeric(FLERR, arg[iarg + 1]);
+      if (newton_max_ < 1 || newton_max_ > 1000)
+        error->all(FLERR, "fix fiber/beam: keyword 'newton_max' must be an integer in [1, 1000]");
+      iarg += 2;
+    } else if (std::strcmp(kw, "max_split") == 0) {
+      need(iarg, 1, kw);
+      max_split_ = force->inumeric(FLERR, arg[iarg + 1]);
+      if (max_split_ < 0 || max_split_ > 20)
+        error->all(FLERR, "fix fiber/beam: keyword 'max_split' must be an integer in [0, 20]");
+      iarg += 2;
+    } else if (std::strcmp(kw, "clamp") == 0) {
+      need(iarg, 1, kw);
+      const int ig = group->find(arg[iarg + 1]);
+      if (ig < 0) error->all(FLERR, "fix fiber/beam: keyword 'clamp': unknown group");
+      clamp_groupbit_ = group->bitmask[ig];
+      iarg += 2;
     } else if (std::strcmp(kw, "dt_check") == 0) {
       need(iarg, 1, kw);
       if (std::strcmp(arg[iarg + 1], "error") == 0) dt_check_error_ = true;
@@ -141,7 +176,8 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     } else {
       const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
                             "' (expected nodes, E, G, density, shear_factor, damping, drag, "
-                            "stiffness_scale, inertia_scale, torque, dt_check)";
+                            "stiffness_scale, inertia_scale, torque, dt_check, integrator, rho_inf, "
+                            "newton_tol, newton_max, max_split, clamp)";
       error->all(FLERR, fiberform::error_text(m));
     }
   }
@@ -183,6 +219,23 @@ void FixFiberBeam::frame(int i, double t1[3], double t2[3], double t3[3]) const 
   put(t1, bm::qrot(q, {1, 0, 0}));
   put(t2, bm::qrot(q, {0, 1, 0}));
   put(t3, bm::qrot(q, {0, 0, 1}));
+}
+
+double FixFiberBeam::beta_eff() const { return implicit_ ? rod::gen_alpha(rho_inf_).beta_eff() : 0.5; }
+double FixFiberBeam::gamma_eff() const { return implicit_ ? rod::gen_alpha(rho_inf_).gamma_eff() : 0.5; }
+void FixFiberBeam::add_velocity_jacobian(int i, const double *D) {
+  if (!implicit_ || i < 0 || i >= atom->nlocal) return;
+  for (int k = 0; k < 6; ++k) node_[i][DJ0 + k] += D[k];
+}
+
+void FixFiberBeam::remove_from_history(int i, const double *F) {
+  if (!implicit_ || i < 0 || i >= atom->nlocal || !is_node(i)) return;
+  const rod::GenAlpha g = rod::gen_alpha(rho_inf_);
+  const double k = 1.0 / atom->rmass[i], ka = k * (1.0 - g.af) / (1.0 - g.am);
+  for (int d = 0; d < 3; ++d) {
+    node_[i][VDX + d] -= k * F[d];
+    node_[i][AX + d] -= ka * F[d];
+  }
 }
 
 void FixFiberBeam::section_radii(int i, double r[4]) const {
@@ -366,7 +419,7 @@ static void missing_neighbour(LAMMPS *lmp, int i, int dtag) {
                 "on this rank. The ghost cut-off must cover one element (check the nodes file and the "
                 "atom IDs, or raise it with 'communicate single cutoff')",
                 lmp->atom->tag[i], lmp->atom->tag[i] + dtag);
-  lmp->error->one(FLERR, buf);
+  fiberform::fail_one(lmp, FLERR, buf);
 }
 
 /* ---------------------------------------------------------------------- 
@@ -468,13 +521,24 @@ void FixFiberBeam::compute_critical_steps(bool print) {
                   "  options: stiffness_scale %g, inertia_scale %g, damping %g s, drag %g s\n"
                   "  critical time step (velocity Verlet, element bound): axial %.4g s, shear %.4g s, "
                   "bending %.4g s, torsion %.4g s\n"
-                  "  timestep %.4g s = %.3f x critical (%s)\n",
+                  "  timestep %.4g s = %.3f x critical (%s)\n"
+                  "  integrator %s",
                   static_cast<long>(nfibers_), static_cast<long>(nnodes_), E_, G_, rho_, kshear_, stiff_scale_,
                   inertia_scale_, t_damp_, tau_drag_, dtall[0], dtall[1], dtall[2], dtall[3], update->dt,
-                  update->dt / mn, names[which]);
+                  update->dt / mn, names[which], implicit_ ? "implicit" : "explicit (velocity Verlet)");
+    say(lmp, buf);
+    if (implicit_) {
+      const rod::GenAlpha g = rod::gen_alpha(rho_inf_);
+      std::snprintf(buf, sizeof buf,
+                    " (generalized-alpha on SO(3): rho_inf %g, alpha_m %.4g, alpha_f %.4g, gamma %.4g, beta %.4g; "
+                    "Newton tolerance %g, at most %d iterations, up to %d halvings)\n",
+                    rho_inf_, g.am, g.af, g.gamma, g.beta, newton_tol_, newton_max_, max_split_);
+    } else {
+      std::snprintf(buf, sizeof buf, "\n");
+    }
     say(lmp, buf);
   }
-  if (update->dt > mn) {
+  if (update->dt > mn && !implicit_) {
     char buf[512];
     std::snprintf(buf, sizeof buf,
                   "fix fiber/beam: timestep %.4g s exceeds the critical step %.4g s of the %s mode. "
@@ -494,6 +558,7 @@ void FixFiberBeam::pre_neighbor() {
   comm_mode_ = 1;
   comm->forward_comm_fix(this);
   comm_mode_ = 0;
+  owners_valid_ = false;  // atoms may have migrated
 }
 
 void FixFiberBeam::setup_pre_force(int vflag) { pre_force(vflag); }
@@ -511,12 +576,27 @@ void FixFiberBeam::setup(int vflag) {
   pre_neighbor();  // ship the element data to the ghosts
   pre_force(vflag);
   compute_critical_steps(true);
+  if (implicit_) {
+    // internal forces of the initial state (later ones come from the converged implicit steps)
+    internal_forces_local();
+    for (int i = 0; i < atom->nlocal; ++i) {
+      if (!(atom->mask[i] & groupbit) || !is_node(i)) continue;
+      for (int k = 0; k < 3; ++k) {
+        node_[i][FIX + k] = acc_[i][k] + acc_[i][6 + k];
+        node_[i][TIX + k] = acc_[i][3 + k] + acc_[i][9 + k];
+      }
+      for (int k = 0; k < 6; ++k) node_[i][DJ0 + k] = 0.0;
+    }
+  }
   post_force(vflag);
 }
 
-/* ---------------------------------------------------------------------- */
+/* ----------------------------------------------------------------------
+   element forces at the current state into acc_: per local atom the force/torque of the element
+   to the previous node (columns 0-5) and to the next node (6-11); element energies summed
+------------------------------------------------------------------------- */
 
-void FixFiberBeam::post_force(int) {
+void FixFiberBeam::internal_forces_local() {
   const int nlocal = atom->nlocal;
   if (nmax_acc_ < atom->nmax) {
     nmax_acc_ = atom->nmax;
@@ -524,7 +604,6 @@ void FixFiberBeam::post_force(int) {
     memory->create(acc_, nmax_acc_, 12, "fiber/beam:acc");
   }
   double **x = atom->x, **v = atom->v, **omega = atom->omega;
-  double **f = atom->f, **torque = atom->torque;
   int *mask = atom->mask;
   energy_local_ = 0;
   dissipation_local_ = 0;
@@ -583,6 +662,33 @@ void FixFiberBeam::post_force(int) {
       }
     }
   }
+}
+
+/* ----------------------------------------------------------------------
+   explicit: the element forces, background drag and external torque go into f / torque.
+   implicit: f / torque receive the internal forces of the current (converged) state, so that the
+   fixes after this one (contact, yarns) see every non-contact force in f, exactly as with the
+   explicit integrator; final_integrate takes them out again (external = f - internal) and solves.
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::post_force(int) {
+  const int nlocal = atom->nlocal;
+  double **v = atom->v, **omega = atom->omega;
+  double **f = atom->f, **torque = atom->torque;
+  int *mask = atom->mask;
+  if (implicit_) {
+    for (int i = 0; i < nlocal; ++i) {
+      if (!(mask[i] & groupbit) || !is_node(i)) continue;
+      for (int k = 0; k < 3; ++k) {
+        f[i][k] += node_[i][FIX + k];
+        torque[i][k] += node_[i][TIX + k];
+      }
+      if (torque_groupbit_ && (mask[i] & torque_groupbit_))
+        for (int k = 0; k < 3; ++k) torque[i][k] += torque_[k];
+    }
+    return;
+  }
+  internal_forces_local();
   // sum in a fixed order (previous element, then next) so results do not depend on the
   // decomposition; then background drag and the external torque
   for (int i = 0; i < nlocal; ++i) {
@@ -605,16 +711,23 @@ void FixFiberBeam::post_force(int) {
 }
 
 /* ----------------------------------------------------------------------
-   velocity Verlet; rotation: body-frame angular momentum, half kick with the torque, free-rotor
-   splitting (physics/beam.h free_rotation), half kick
+   explicit: velocity Verlet; rotation: body-frame angular momentum, half kick with the torque,
+   free-rotor splitting (physics/beam.h free_rotation), half kick.
+   implicit: nothing moves here; the whole step is done in final_integrate.
+   Clamped nodes (keyword clamp) never move.
 ------------------------------------------------------------------------- */
 
 void FixFiberBeam::initial_integrate(int) {
+  if (implicit_) return;
   double **x = atom->x, **v = atom->v, **f = atom->f, **omega = atom->omega, **torque = atom->torque;
   double *rmass = atom->rmass;
   int *mask = atom->mask;
   for (int i = 0; i < atom->nlocal; ++i) {
     if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    if (clamp_groupbit_ && (mask[i] & clamp_groupbit_)) {
+      for (int k = 0; k < 3; ++k) v[i][k] = omega[i][k] = 0.0;
+      continue;
+    }
     const double dtfm = dtf_ / rmass[i];
     for (int k = 0; k < 3; ++k) {
       v[i][k] += dtfm * f[i][k];
@@ -631,11 +744,19 @@ void FixFiberBeam::initial_integrate(int) {
 }
 
 void FixFiberBeam::final_integrate() {
+  if (implicit_) {
+    implicit_step();
+    return;
+  }
   double **v = atom->v, **f = atom->f, **omega = atom->omega, **torque = atom->torque;
   double *rmass = atom->rmass;
   int *mask = atom->mask;
   for (int i = 0; i < atom->nlocal; ++i) {
     if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    if (clamp_groupbit_ && (mask[i] & clamp_groupbit_)) {
+      for (int k = 0; k < 3; ++k) v[i][k] = omega[i][k] = 0.0;
+      continue;
+    }
     const double dtfm = dtf_ / rmass[i];
     for (int k = 0; k < 3; ++k) v[i][k] += dtfm * f[i][k];
     const double *p = node_[i];
@@ -647,10 +768,273 @@ void FixFiberBeam::final_integrate() {
 }
 
 /* ----------------------------------------------------------------------
+   implicit step. Each fiber is solved in one place: the rank that owns its node 0 (the "owner").
+   Every rank sends the records of its fiber nodes to the owners (MPI_Alltoallv), the owners run
+   the generalized-alpha Newton solve (physics/implicit_rod.h) on whole fibers in node order (so the
+   result does not depend on the decomposition), and send the new states back. No ghost reach
+   beyond one element is needed; the cost is two all-to-all exchanges per step.
+------------------------------------------------------------------------- */
+
+namespace {
+// send record layout
+enum SendCol {
+  S_TAG = 0, S_FID, S_IDX, S_CNT, S_X, S_Q = S_X + 3, S_V = S_Q + 4, S_W = S_V + 3, S_ACC = S_W + 3,
+  S_M = S_ACC + 12, S_J, S_F = S_J + 3, S_T = S_F + 3, S_D = S_T + 3, S_FIXED = S_D + 6, S_ACCOK, S_SCALE,
+  S_HASREF, S_L0, S_G0, S_K0 = S_G0 + 3, S_CG = S_K0 + 3, S_CK = S_CG + 3, S_SRC = S_CK + 3, S_N
+};
+// return record layout
+enum RecvCol { R_TAG = 0, R_DX, R_Q = R_DX + 3, R_V = R_Q + 4, R_W = R_V + 3, R_ACC = R_W + 3, R_FI = R_ACC + 12,
+  R_TI = R_FI + 3, R_N = R_TI + 3 };
+}  // namespace
+
+void FixFiberBeam::update_owners() {
+  int maxfid = -1;
+  for (int i = 0; i < atom->nlocal; ++i)
+    if ((atom->mask[i] & groupbit) && is_node(i)) maxfid = std::max(maxfid, fiber_id(i));
+  int gmax = -1;
+  MPI_Allreduce(&maxfid, &gmax, 1, MPI_INT, MPI_MAX, world);
+  std::vector<int> mine(static_cast<size_t>(gmax + 1), -1);
+  for (int i = 0; i < atom->nlocal; ++i)
+    if ((atom->mask[i] & groupbit) && is_node(i) && node_index(i) == 0) mine[fiber_id(i)] = comm->me;
+  owner_.assign(mine.size(), -1);
+  if (!mine.empty())
+    MPI_Allreduce(mine.data(), owner_.data(), static_cast<int>(mine.size()), MPI_INT, MPI_MAX, world);
+  owners_valid_ = true;
+}
+
+void FixFiberBeam::implicit_step() {
+  if (!owners_valid_) update_owners();
+  const int nlocal = atom->nlocal, nprocs = comm->nprocs;
+  double **x = atom->x, **v = atom->v, **f = atom->f, **omega = atom->omega, **torque = atom->torque;
+  int *mask = atom->mask;
+  const double dt = update->dt;
+
+  // ---- pack node records per destination
+  scount_.assign(nprocs, 0);
+  std::vector<int> dest(static_cast<size_t>(nlocal), -1);
+  for (int i = 0; i < nlocal; ++i) {
+    if (!(mask[i] & groupbit) || !is_node(i)) continue;
+    const int fid = fiber_id(i);
+    const int o = fid < static_cast<int>(owner_.size()) ? owner_[fid] : -1;
+    if (o < 0) {
+      static char buf[256];
+      std::snprintf(buf, sizeof buf, "fix fiber/beam: node %d of fiber %d has no owner (node 0 of the fiber is "
+                    "missing: fibers must be deleted whole)", atom->tag[i], fid);
+      fiberform::fail_one(lmp, FLERR, buf);
+    }
+    dest[i] = o;
+    scount_[o] += S_N;
+  }
+  sdispl_.assign(nprocs, 0);
+  for (int r = 1; r < nprocs; ++r) sdispl_[r] = sdispl_[r - 1] + scount_[r - 1];
+  sendbuf_.assign(static_cast<size_t>(sdispl_[nprocs - 1] + scount_[nprocs - 1]), 0.0);
+  {
+    std::vector<int> fill(sdispl_);
+    for (int i = 0; i < nlocal; ++i) {
+      if (dest[i] < 0) continue;
+      double *b = &sendbuf_[fill[dest[i]]];
+      fill[dest[i]] += S_N;
+      const double *p = node_[i];
+      b[S_TAG] = atom->tag[i];
+      b[S_FID] = p[FID];
+      b[S_IDX] = p[IDX];
+      b[S_CNT] = p[CNT];
+      for (int k = 0; k < 3; ++k) {
+        b[S_X + k] = x[i][k];
+        b[S_V + k] = v[i][k];
+        b[S_F + k] = f[i][k] - p[FIX + k];
+        b[S_T + k] = torque[i][k] - p[TIX + k];
+        b[S_J + k] = p[JB1 + k];
+        b[S_G0 + k] = p[G0X + k];
+        b[S_K0 + k] = p[K0X + k];
+        b[S_CG + k] = p[CGX + k];
+        b[S_CK + k] = p[CKX + k];
+      }
+      for (int k = 0; k < 4; ++k) b[S_Q + k] = p[QW + k];
+      const bm::Vec3 Wb = bm::qrot_t(quat(&p[QW]), vec(omega[i]));
+      b[S_W] = Wb.x; b[S_W + 1] = Wb.y; b[S_W + 2] = Wb.z;
+      for (int k = 0; k < 12; ++k) b[S_ACC + k] = p[AX + k];
+      for (int k = 0; k < 6; ++k) b[S_D + k] = p[DJ0 + k];
+      b[S_M] = atom->rmass[i];
+      b[S_FIXED] = (clamp_groupbit_ && (mask[i] & clamp_groupbit_)) ? 1.0 : 0.0;
+      b[S_ACCOK] = p[ACCOK];
+      b[S_SCALE] = std::max(p[A1], p[A2]);
+      b[S_HASREF] = p[HASREF];
+      b[S_L0] = p[L0];
+      b[S_SRC] = comm->me;
+    }
+  }
+  rcount_.assign(nprocs, 0);
+  MPI_Alltoall(scount_.data(), 1, MPI_INT, rcount_.data(), 1, MPI_INT, world);
+  rdispl_.assign(nprocs, 0);
+  for (int r = 1; r < nprocs; ++r) rdispl_[r] = rdispl_[r - 1] + rcount_[r - 1];
+  recvbuf_.assign(static_cast<size_t>(rdispl_[nprocs - 1] + rcount_[nprocs - 1]), 0.0);
+  MPI_Alltoallv(sendbuf_.data(), scount_.data(), sdispl_.data(), MPI_DOUBLE, recvbuf_.data(), rcount_.data(),
+                rdispl_.data(), MPI_DOUBLE, world);
+
+  // ---- group the received records by fiber, in node order
+  const size_t nrec = recvbuf_.size() / S_N;
+  std::map<int, std::vector<const double *>> fibers;
+  for (size_t r = 0; r < nrec; ++r) {
+    const double *b = &recvbuf_[r * S_N];
+    auto &vecf = fibers[static_cast<int>(b[S_FID])];
+    if (vecf.empty()) vecf.assign(static_cast<size_t>(b[S_CNT]), nullptr);
+    const int idx = static_cast<int>(b[S_IDX]);
+    if (idx < 0 || idx >= static_cast<int>(vecf.size())) error->one(FLERR, "fix fiber/beam: bad node index");
+    vecf[idx] = b;
+  }
+  const rod::GenAlpha ga = rod::gen_alpha(rho_inf_);
+  rod::Options opt;
+  opt.tol = newton_tol_;
+  opt.max_iter = newton_max_;
+  opt.max_split = max_split_;
+  opt.t_damp = t_damp_;
+  opt.tau_drag = tau_drag_;
+  static rod::Stepper stepper;
+  std::vector<rod::Node> nodes;
+  std::vector<rod::Element> elems;
+  std::vector<bm::Vec3> starts;
+  // return records, per source rank
+  std::vector<std::vector<double>> back(static_cast<size_t>(nprocs));
+  energy_local_ = 0;
+  dissipation_local_ = 0;
+  for (int k = 0; k < 4; ++k) stat_local_[k] = 0;
+  for (auto &kv : fibers) {
+    const std::vector<const double *> &rec = kv.second;
+    const size_t n = rec.size();
+    for (size_t k = 0; k < n; ++k)
+      if (!rec[k]) {
+        static char buf[256];
+        std::snprintf(buf, sizeof buf, "fix fiber/beam: fiber %d: node %d did not reach the fiber's owner rank "
+                      "(fibers must be deleted whole)", kv.first, static_cast<int>(k));
+        fiberform::fail_one(lmp, FLERR, buf);
+      }
+    nodes.assign(n, rod::Node{});
+    elems.assign(n > 0 ? n - 1 : 0, rod::Element{});
+    bool need_init = false;
+    for (size_t k = 0; k < n; ++k) {
+      const double *b = rec[k];
+      rod::Node &nd = nodes[k];
+      nd.x = {b[S_X], b[S_X + 1], b[S_X + 2]};
+      if (k > 0) {  // unwrap periodic images: each node next to the previous one
+        double d[3] = {nd.x.x - rec[k - 1][S_X], nd.x.y - rec[k - 1][S_X + 1], nd.x.z - rec[k - 1][S_X + 2]};
+        domain->minimum_image(d);
+        nd.x = nodes[k - 1].x + bm::Vec3{d[0], d[1], d[2]};
+      }
+      nd.q = {b[S_Q], b[S_Q + 1], b[S_Q + 2], b[S_Q + 3]};
+      nd.v = {b[S_V], b[S_V + 1], b[S_V + 2]};
+      nd.W = {b[S_W], b[S_W + 1], b[S_W + 2]};
+      nd.ax = {b[S_ACC], b[S_ACC + 1], b[S_ACC + 2]};
+      nd.aw = {b[S_ACC + 3], b[S_ACC + 4], b[S_ACC + 5]};
+      nd.vdx = {b[S_ACC + 6], b[S_ACC + 7], b[S_ACC + 8]};
+      nd.vdw = {b[S_ACC + 9], b[S_ACC + 10], b[S_ACC + 11]};
+      nd.m = b[S_M];
+      nd.J = {b[S_J], b[S_J + 1], b[S_J + 2]};
+      nd.F = {b[S_F], b[S_F + 1], b[S_F + 2]};
+      nd.T = {b[S_T], b[S_T + 1], b[S_T + 2]};
+      for (int c = 0; c < 6; ++c) nd.D[c] = b[S_D + c];
+      nd.fixed = b[S_FIXED] > 0.5;
+      nd.scale = b[S_SCALE];
+      if (b[S_ACCOK] < 0.5) need_init = true;
+      if (k + 1 < n) {
+        if (b[S_HASREF] < 0.5) error->one(FLERR, "fix fiber/beam: element without reference");
+        rod::Element &el = elems[k];
+        el.ref.L0 = b[S_L0];
+        el.ref.gamma0 = {b[S_G0], b[S_G0 + 1], b[S_G0 + 2]};
+        el.ref.kappa0 = {b[S_K0], b[S_K0 + 1], b[S_K0 + 2]};
+        el.C.CG = {b[S_CG], b[S_CG + 1], b[S_CG + 2]};
+        el.C.CK = {b[S_CK], b[S_CK + 1], b[S_CK + 2]};
+      }
+    }
+    starts.resize(n);
+    for (size_t k = 0; k < n; ++k) starts[k] = nodes[k].x;
+    // consistent initial accelerations only when the step resolves every mode (physics/implicit_rod.h)
+    if (need_init) stepper.initialise(nodes, elems, opt, dt < dt_crit_[4]);
+    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt);
+    if (!st.ok) {
+      double amax = 0, vmax = 0;
+      int kmax = 0;
+      for (size_t k = 0; k < n; ++k) {
+        const double a = bm::norm(nodes[k].F) / nodes[k].m;
+        if (a > amax) amax = a, kmax = static_cast<int>(k);
+        vmax = std::max(vmax, bm::norm(nodes[k].v));
+      }
+      static char buf[768];
+      std::snprintf(buf, sizeof buf,
+                    "fix fiber/beam: the implicit step of fiber %d did not converge at step %ld, even split "
+                    "into 2^%d sub-steps (newton_tol %g, newton_max %d); largest external force per mass "
+                    "%.3g m/s2 (node %d), largest node speed %.3g m/s. Look for an excessive external force "
+                    "(contact, drag) on this fiber, or reduce the timestep; see docs/styles/fix_fiber_beam.md",
+                    kv.first, static_cast<long>(update->ntimestep), max_split_, newton_tol_, newton_max_, amax,
+                    kmax, vmax);
+      fiberform::fail_one(lmp, FLERR, buf);
+    }
+    energy_local_ += st.energy;
+    dissipation_local_ += st.dissipation;
+    stat_local_[0] += st.iterations;
+    stat_local_[1] += 1;
+    stat_local_[2] += st.splits;
+    stat_local_[3] = std::max(stat_local_[3], static_cast<double>(st.iterations));
+    for (size_t k = 0; k < n; ++k) {
+      const double *b = rec[k];
+      const rod::Node &nd = nodes[k];
+      std::vector<double> &out = back[static_cast<size_t>(b[S_SRC])];
+      const size_t o = out.size();
+      out.resize(o + R_N);
+      double *r = &out[o];
+      r[R_TAG] = b[S_TAG];
+      const bm::Vec3 w = bm::qrot(nd.q, nd.W);
+      for (int c = 0; c < 3; ++c) {
+        // displacement from the unwrapped start, so that the owning rank keeps its periodic image
+        r[R_DX + c] = nd.x[c] - starts[k][c];
+        r[R_V + c] = nd.v[c];
+        r[R_W + c] = w[c];
+        r[R_FI + c] = nd.Fint[c];
+        r[R_TI + c] = nd.Tint[c];
+      }
+      r[R_Q] = nd.q.w; r[R_Q + 1] = nd.q.x; r[R_Q + 2] = nd.q.y; r[R_Q + 3] = nd.q.z;
+      const bm::Vec3 acc[4] = {nd.ax, nd.aw, nd.vdx, nd.vdw};
+      for (int a = 0; a < 4; ++a)
+        for (int c = 0; c < 3; ++c) r[R_ACC + 3 * a + c] = acc[a][c];
+    }
+  }
+  // ---- return the new states
+  std::vector<int> bcount(nprocs), bdispl(nprocs, 0), rc(nprocs), rd(nprocs, 0);
+  for (int r = 0; r < nprocs; ++r) bcount[r] = static_cast<int>(back[r].size());
+  for (int r = 1; r < nprocs; ++r) bdispl[r] = bdispl[r - 1] + bcount[r - 1];
+  std::vector<double> bsend(static_cast<size_t>(bdispl[nprocs - 1] + bcount[nprocs - 1]));
+  for (int r = 0; r < nprocs; ++r) std::copy(back[r].begin(), back[r].end(), bsend.begin() + bdispl[r]);
+  MPI_Alltoall(bcount.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, world);
+  for (int r = 1; r < nprocs; ++r) rd[r] = rd[r - 1] + rc[r - 1];
+  std::vector<double> brecv(static_cast<size_t>(rd[nprocs - 1] + rc[nprocs - 1]));
+  MPI_Alltoallv(bsend.data(), bcount.data(), bdispl.data(), MPI_DOUBLE, brecv.data(), rc.data(), rd.data(),
+                MPI_DOUBLE, world);
+  for (size_t o = 0; o + R_N <= brecv.size(); o += R_N) {
+    const double *r = &brecv[o];
+    const int i = atom->map(static_cast<int>(r[R_TAG]));
+    if (i < 0 || i >= nlocal) error->one(FLERR, "fix fiber/beam: returned node is not owned here");
+    double *p = node_[i];
+    for (int c = 0; c < 3; ++c) {
+      x[i][c] += r[R_DX + c];
+      v[i][c] = r[R_V + c];
+      omega[i][c] = r[R_W + c];
+      p[FIX + c] = r[R_FI + c];
+      p[TIX + c] = r[R_TI + c];
+    }
+    for (int c = 0; c < 4; ++c) p[QW + c] = r[R_Q + c];
+    for (int c = 0; c < 12; ++c) p[AX + c] = r[R_ACC + c];
+    p[ACCOK] = 1.0;
+    for (int c = 0; c < 6; ++c) p[DJ0 + c] = 0.0;
+  }
+}
+
+/* ----------------------------------------------------------------------
    global output: scalar = elastic energy (J). vector (1-based in f_ID[n]):
    1 elastic energy, 2 translational kinetic energy, 3 rotational kinetic energy (with the node
    inertia of this fix), 4 total, 5 damping power (W), 6 critical step (min), 7-10 critical steps
-   axial, shear, bending, torsion, 11 stiffness_scale, 12 inertia_scale, 13 damping time
+   axial, shear, bending, torsion, 11 stiffness_scale, 12 inertia_scale, 13 damping time,
+   14 mean Newton iterations per fiber in the last step, 15 largest Newton iterations of a fiber in
+   the last step, 16 sub-step splits in the last step (implicit), 17 rho_inf (-1: explicit)
 ------------------------------------------------------------------------- */
 
 double FixFiberBeam::compute_scalar() {
@@ -685,6 +1069,17 @@ double FixFiberBeam::compute_vector(int n) {
   if (n == 10) return stiff_scale_;
   if (n == 11) return inertia_scale_;
   if (n == 12) return t_damp_;
+  if (n >= 13 && n <= 15) {
+    // Newton iterations per fiber in the last step, largest per fiber, sub-step splits in the last step
+    double loc[3] = {stat_local_[0], stat_local_[1], stat_local_[2]}, all[3];
+    MPI_Allreduce(loc, all, 3, MPI_DOUBLE, MPI_SUM, world);
+    if (n == 13) return all[1] > 0 ? all[0] / all[1] : 0.0;
+    if (n == 15) return all[2];
+    double mx = stat_local_[3], gmx = 0;
+    MPI_Allreduce(&mx, &gmx, 1, MPI_DOUBLE, MPI_MAX, world);
+    return gmx;
+  }
+  if (n == 16) return implicit_ ? rho_inf_ : -1.0;
   return 0.0;
 }
 

@@ -21,6 +21,7 @@
 #define LMP_FIX_FIBER_BEAM_H
 
 #include <string>
+#include <vector>
 
 #include "fix.h"
 
@@ -75,6 +76,33 @@ class FixFiberBeam : public Fix {
   // the first fix fiber/beam defined in this LAMMPS instance, or nullptr
   static FixFiberBeam *find(class LAMMPS *lmp);
 
+  // ---- time integration (docs/models/beam.md, "Implicit time integration") ----
+  // true with `integrator implicit` (the default): positions, frames and velocities change only in
+  // final_integrate, by one Newton solve per fiber of the generalized-alpha step.
+  bool implicit() const { return implicit_; }
+  // Effective Newmark coefficients of a force held constant over one step (implicit scheme):
+  // dx(t+dt) = beta_eff dt^2 F/m, dv(t+dt) = gamma_eff dt F/m. Contact styles use beta_eff in the
+  // averaged force of thesis eq. 2.22 and gamma_eff for velocity-level limiters (friction).
+  // Explicit (velocity Verlet): 1/2 and 1/2.
+  double beta_eff() const;
+  double gamma_eff() const;
+  // Implicit scheme only: adds D = -dF/dv (N s/m, symmetric 3x3 given as xx yy zz xy xz yz) of an
+  // external force that a fix added to f this step, for local atom i. The Newton solve then treats
+  // that force as F(v) ~ F(v_n) - D (v - v_n) (linearly implicit; fix fiber/drag uses it). Ignored
+  // with the explicit integrator. Cleared after every step.
+  void add_velocity_jacobian(int i, const double D[6]);
+  // Implicit scheme only, after final_integrate of the step: a contact style that landed node i on
+  // the end state of its own sub-integration (position through a constant force F in this step,
+  // velocity set directly) takes F out of the scheme's acceleration history (dv/dt and the
+  // pseudo-acceleration), so that the generalized-alpha memory does not deliver F's impulse a
+  // second time in the following steps. F in N, spatial.
+  void remove_from_history(int i, const double F[3]);
+  double youngs_modulus() const { return E_; }  // Pa
+  double density() const { return rho_; }       // kg/m3
+  // Implicit scheme: the internal (elastic) force and torque of local node i at the start of the
+  // step (the last converged state); f and torque contain them after this fix's post_force.
+  const double *internal_force(int i) const { return &node_[i][FIX]; }
+
   // column layout of the per-atom array (all doubles)
   enum Col {
     FID = 0, IDX, CNT,              // fiber ID (-1: not a fiber node), node index, node count
@@ -86,6 +114,12 @@ class FixFiberBeam : public Fix {
     CGX, CGY, CGZ, CKX, CKY, CKZ,   // element stiffness GA1 GA2 EA EI1 EI2 GJ
     NSTATIC,                        // columns below are not sent to ghosts
     JB1 = NSTATIC, JB2, JB3,        // rotary inertia of the node about t1, t2, t3, kg m^2
+    // implicit integrator state (migrates with the atom, written to restart files)
+    AX, AY, AZ, AWX, AWY, AWZ,      // generalized-alpha pseudo-accelerations (spatial, body)
+    VDX, VDY, VDZ, VDWX, VDWY, VDWZ, // accelerations dv/dt (spatial), dW/dt (body)
+    FIX, FIY, FIZ, TIX, TIY, TIZ,   // internal force/torque at the current state (spatial)
+    ACCOK,                          // 1 once the accelerations above are initialised
+    DJ0, DJ1, DJ2, DJ3, DJ4, DJ5,   // -dF/dv of this step's external forces (xx yy zz xy xz yz)
     NCOL
   };
 
@@ -94,6 +128,9 @@ class FixFiberBeam : public Fix {
   void compute_reference();
   void compute_critical_steps(bool print);
   void element_section(int i, int j, double *area, double inertia[3], double stiff[6]) const;
+  void internal_forces_local();    // element forces of the current state into acc_ (ghosts needed)
+  void implicit_step();            // gather fibers to their owners, Newton solve, scatter
+  void update_owners();            // rank of node 0 of every fiber (after atoms migrate)
 
   double **node_ = nullptr;    // per-atom state, NCOL columns
   double **acc_ = nullptr;     // scratch: per-local-atom force/torque from prev (0-5), next (6-11)
@@ -104,6 +141,16 @@ class FixFiberBeam : public Fix {
   int torque_groupbit_ = 0;
   double torque_[3] = {0, 0, 0};
   bool dt_check_error_ = true;
+  bool implicit_ = true;
+  double rho_inf_ = 0.5, newton_tol_ = 1e-8;
+  int newton_max_ = 25, max_split_ = 8;
+  int clamp_groupbit_ = 0;
+  std::vector<int> owner_;            // owner rank of fiber ID (index), -1 if absent
+  bool owners_valid_ = false;
+  std::vector<double> sendbuf_, recvbuf_;
+  std::vector<int> scount_, rcount_, sdispl_, rdispl_;
+  double stat_local_[4] = {0, 0, 0, 0};  // Newton iterations, fibers solved, splits, max iterations
+  double stat_total_splits_ = 0;
   std::string nodes_path_;
 
   int ref_done_ = 0;

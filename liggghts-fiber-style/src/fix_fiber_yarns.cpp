@@ -21,6 +21,7 @@
 #include "comm.h"
 #include "error.h"
 #include "fix_fiber_beam.h"
+#include "physics/contact_geometry.h"
 #include "modify.h"
 #include "update.h"
 
@@ -112,6 +113,20 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
       nevery = static_cast<int>(val(2));
       if (!(settle_speed_ > 0.0) || nevery < 1) error->all(FLERR, "fix fiber/yarns: settle needs V > 0 and M >= 1");
       iarg += 3;
+    } else if (kw == "implicit_force") {
+      need(1);
+      const std::string m = arg[iarg + 1];
+      if (m == "impulse") impulse_kw_ = true;
+      else if (m == "position") impulse_kw_ = false;
+      else error->all(FLERR, "fix fiber/yarns: implicit_force must be impulse or position");
+      iarg += 2;
+    } else if (kw == "integrator") {
+      need(1);
+      const std::string m = arg[iarg + 1];
+      if (m == "cvode") use_cvode_ = true;
+      else if (m == "substep") use_cvode_ = false;
+      else error->all(FLERR, "fix fiber/yarns: integrator must be cvode or substep");
+      iarg += 2;
     } else if (kw == "substeps") {
       need(1);
       substeps_ = static_cast<int>(val(1));
@@ -240,6 +255,12 @@ void FixFiberYarns::build_bins() {
 int FixFiberYarns::setmask() { return POST_FORCE | PRE_EXCHANGE | END_OF_STEP; }
 
 void FixFiberYarns::end_of_step() {
+  if (implicit_ && !impulse_ && land_.size() >= 6 * static_cast<size_t>(atom->nlocal)) {
+    for (int i = 0; i < atom->nlocal; ++i) {
+      for (int k = 0; k < 3; ++k) atom->v[i][k] += land_[6 * i + k];
+      beam_->remove_from_history(i, &land_[6 * i + 3]);
+    }
+  }
   if (!(settle_speed_ > 0.0)) return;
   double vmax = 0.0;
   if (settle_fiber_) {
@@ -279,6 +300,12 @@ void FixFiberYarns::end_of_step() {
 void FixFiberYarns::init() {
   beam_ = FixFiberBeam::find(lmp);
   if (!beam_) error->all(FLERR, "fix fiber/yarns: needs a fix fiber/beam (fiber topology and sections)");
+  implicit_ = beam_->implicit();
+  impulse_ = !implicit_ || impulse_kw_;
+  integ_.configure(use_cvode_ ? fiberform::ContactIntegrator::Method::Cvode : fiberform::ContactIntegrator::Method::Substep,
+                   substeps_, 1e-6, 1e-13);
+  beta_eff_ = implicit_ ? beam_->beta_eff() : 0.5;
+  gamma_eff_ = implicit_ ? beam_->gamma_eff() : 1.0;  // explicit: stop the tangential motion over dt
   if (!atom->rmass_flag) error->all(FLERR, "fix fiber/yarns: needs per-atom mass (atom_style sphere)");
   if (!atom->map_style) error->all(FLERR, "fix fiber/yarns: needs atom_modify map array (element contact)");
   // bins must cover the elements: reach = largest fiber radius + longest element (local maxima)
@@ -315,68 +342,116 @@ void FixFiberYarns::init() {
 
 void FixFiberYarns::setup(int vflag) { post_force(vflag); }
 
-/* One node against a static body: 1-D normal motion over the step, velocity-Verlet sub-steps, the
-   other forces on the node held constant; the average contact force is applied. */
+
+/* Implicit fibers: the constant force fc lands the contact point on the sub-integrated end position;
+   its velocity then changed by gamma_eff dt fc / m instead of the sub-integrated dt fv / m. Record the
+   impulse that makes up the difference (split by the lever rule: the point's velocity changes by
+   exactly that amount) and fc itself, to be taken out of the scheme's history after the implicit
+   solve (end_of_step), as the contact styles do (fiber_contact_fix.h). */
+void FixFiberYarns::land_velocity(int i, int j, double wi, double wj, const double n[3], double fc, double fv,
+                                  double inv_m) {
+  (void)inv_m;
+  const double J = update->dt * (fv - gamma_eff_ * fc);
+  for (int k = 0; k < 3; ++k) {
+    land_[6 * i + k] += wi * J * n[k] / atom->rmass[i];
+    land_[6 * i + 3 + k] += wi * fc * n[k];
+    if (j >= 0) {
+      land_[6 * j + k] += wj * J * n[k] / atom->rmass[j];
+      land_[6 * j + 3 + k] += wj * fc * n[k];
+    }
+  }
+}
+
+/* Distance node i may travel in one step (speed and the other forces held): contacts closer than the
+   law's range plus this are sub-integrated, so that a large step cannot jump over the range. */
+double FixFiberYarns::travel(int i) const {
+  const double *v = atom->v[i], *f = atom->f[i];
+  const double dt = update->dt, m = atom->rmass[i];
+  const double sp = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  const double ac = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) / m;
+  return 2.0 * (sp * dt + 0.5 * ac * dt * dt);
+}
+
+/* The normal motion of one contact point against a static body over the step: the point (position p,
+   velocity v, other forces per mass a, inverse mass inv_m) and the body's surface at gap h along the
+   unit normal n (towards the point) as a plane pair of the contact integrator (CVODE or velocity-
+   Verlet sub-steps, the same integrator and law as pair_style fiber/dlvo). Returns the normal
+   components of the two averaged forces: fpos (2 m y / dt^2, eq. 2.22 with beta 1/2 minus m a) and
+   fvel (m w / dt, the impulse). */
+void FixFiberYarns::normal_solve(const double p[3], const double v[3], const double a[3], double inv_m,
+                                 const double n[3], double h, double r1, double r2, double &fpos, double &fvel) {
+  phys::PairLaw pl;
+  pl.setup(law_, r1, r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
+  fiberform::PairGeometry g;
+  g.plane = true;
+  g.normal = {n[0], n[1], n[2]};
+  g.offset = std::isfinite(r2) ? r1 + r2 : r1;
+  fiberform::PointState s1, s2;
+  s1.p = {p[0], p[1], p[2]};
+  s1.v = {v[0], v[1], v[2]};
+  s1.a = {a[0], a[1], a[2]};
+  s1.inv_m = inv_m;
+  const double back = h + g.offset;
+  s2.p = {p[0] - back * n[0], p[1] - back * n[1], p[2] - back * n[2]};
+  s2.inv_m = 0.0;
+  const fiberform::PairResult r = integ_.solve(pl, g, s1, s2, update->dt);
+  if (!r.ok) ++failures_;
+  fpos = r.fpos1.x * n[0] + r.fpos1.y * n[1] + r.fpos1.z * n[2];
+  fvel = r.fvel1.x * n[0] + r.fvel1.y * n[1] + r.fvel1.z * n[2];
+}
+
+/* The force applied over the step from the two averages: explicit fibers (velocity Verlet, half-step
+   velocities): the impulse fvel, as before; implicit fibers: eq. 2.22 with the scheme's beta_eff,
+   fpos / (2 beta_eff), plus the velocity landing recorded for end_of_step. */
+double FixFiberYarns::applied_force(double fpos, double fvel) const {
+  return implicit_ && !impulse_ ? fpos / (2.0 * beta_eff_) : fvel;
+}
+
+/* One node against a static body (plane or yarn), the other forces on the node held constant. */
 void FixFiberYarns::apply_contact(int i, const double n[3], double h, double r1, double r2, double &gap_min) {
   double *v = atom->v[i], *f = atom->f[i];
   const double m = atom->rmass[i];
   const double dt = update->dt;
   const double u0 = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
   if (h + std::min(0.0, u0) * dt - std::fabs(u0) * dt >= law_.h_cut && h >= law_.h_cut) return;
-  const double a_ext = (f[0] * n[0] + f[1] * n[1] + f[2] * n[2]) / m;
-  phys::PairLaw pl;
-  pl.setup(law_, r1, r2, 1.0 / m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
-  const double hs = dt / substeps_;
-  double hh = h, u = u0;
-  double acc = a_ext + pl.force(hh, u) / m;
-  for (int s = 0; s < substeps_; ++s) {
-    u += 0.5 * hs * acc;
-    hh += hs * u;
-    acc = a_ext + pl.force(hh, u) / m;  // force at the new gap with the half-step rate
-    u += 0.5 * hs * acc;
-  }
-  const double fc = m * ((u - u0) / dt - a_ext);  // average contact force over the step
+  const double a[3] = {f[0] / m, f[1] / m, f[2] / m};
+  const double inv_m = 1.0 / m;
+  double fpos, fvel;
+  normal_solve(atom->x[i], v, a, inv_m, n, h, r1, r2, fpos, fvel);
+  const double fc = applied_force(fpos, fvel);
   for (int k = 0; k < 3; ++k) f[k] += fc * n[k];
+  if (implicit_ && !impulse_) land_velocity(i, -1, 1.0, 0.0, n, fc, fvel, inv_m);
   if (mu_ > 0.0 && fc > 0.0) apply_friction(i, -1, 0.0, n, fc);
   gap_min = std::min(gap_min, h);
 }
 
-
 /* One element (nodes i, j) against a static body at the element point of parameter s (0: i, 1: j):
-   the contact point's normal motion over the step with velocity-Verlet sub-steps, effective mass
-   1/m = (1-s)^2/m_i + s^2/m_j, the other forces on both nodes held constant; the average contact
-   force is split by the lever rule ((1-s) to i, s to j: total force and torque about any point kept,
-   thesis 2.4.2). */
+   the contact point's motion over the step with effective mass 1/m = (1-s)^2/m_i + s^2/m_j, the
+   other forces on both nodes held constant; the average contact force is split by the lever rule
+   ((1-s) to i, s to j: total force and torque about any point kept, thesis 2.4.2). */
 void FixFiberYarns::apply_element_contact(int i, int j, double s, const double n[3], double h, double r1,
                                           double r2, double &gap_min) {
   double *vi = atom->v[i], *vj = atom->v[j], *fi = atom->f[i], *fj = atom->f[j];
   const double mi = atom->rmass[i], mj = atom->rmass[j];
   const double wi = 1.0 - s, wj = s;
   const double dt = update->dt;
-  double u0 = 0.0, a_ext = 0.0;
+  double u0 = 0.0, p[3], v[3], a[3];
   for (int k = 0; k < 3; ++k) {
-    u0 += (wi * vi[k] + wj * vj[k]) * n[k];
-    a_ext += (wi * fi[k] / mi + wj * fj[k] / mj) * n[k];
+    p[k] = wi * atom->x[i][k] + wj * atom->x[j][k];
+    v[k] = wi * vi[k] + wj * vj[k];
+    a[k] = wi * fi[k] / mi + wj * fj[k] / mj;
+    u0 += v[k] * n[k];
   }
   if (h - 2.0 * std::fabs(u0) * dt >= law_.h_cut) return;
   const double inv_m = wi * wi / mi + wj * wj / mj;
-  const double m = 1.0 / inv_m;
-  phys::PairLaw pl;
-  pl.setup(law_, r1, r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
-  const double hs = dt / substeps_;
-  double hh = h, u = u0;
-  double acc = a_ext + pl.force(hh, u) / m;
-  for (int k = 0; k < substeps_; ++k) {
-    u += 0.5 * hs * acc;
-    hh += hs * u;
-    acc = a_ext + pl.force(hh, u) / m;
-    u += 0.5 * hs * acc;
-  }
-  const double fc = m * ((u - u0) / dt - a_ext);
+  double fpos, fvel;
+  normal_solve(p, v, a, inv_m, n, h, r1, r2, fpos, fvel);
+  const double fc = applied_force(fpos, fvel);
   for (int k = 0; k < 3; ++k) {
     fi[k] += wi * fc * n[k];
     fj[k] += wj * fc * n[k];
   }
+  if (implicit_ && !impulse_) land_velocity(i, j, wi, wj, n, fc, fvel, inv_m);
   if (mu_ > 0.0 && fc > 0.0) apply_friction(i, j, s, n, fc);
   gap_min = std::min(gap_min, h);
 }
@@ -401,7 +476,7 @@ void FixFiberYarns::apply_friction(int i, int j, double s, const double n[3], do
   }
   double ft[3], ft2 = 0.0;
   for (int k = 0; k < 3; ++k) {
-    ft[k] = -((vt[k] - vn * n[k]) / dt + (at[k] - an * n[k])) / inv_m;
+    ft[k] = -((vt[k] - vn * n[k]) / (gamma_eff_ * dt) + (at[k] - an * n[k])) / inv_m;
     ft2 += ft[k] * ft[k];
   }
   const double lim = mu_ * fn;
@@ -456,7 +531,7 @@ void FixFiberYarns::element_yarn_contacts(int i, int j, double r1, double &gap_m
       d[k] = (x[i][k] + se * (x[j][k] - x[i][k])) - (sg.a[k] + ty * (sg.b[k] - sg.a[k]));
     const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     const double h = dist - sg.radius - r1;
-    if (h >= margin - r1 || dist <= 0.0) continue;
+      if (h >= margin - r1 || dist <= 0.0) continue;
     int slot = -1;
     for (int b = 0; b < nbest; ++b)
       if (best_yarn[b] == sg.yarn) slot = b;
@@ -498,7 +573,7 @@ void FixFiberYarns::node_yarn_contacts(int i, double r1, double &gap_min) {
     for (int k = 0; k < 3; ++k) d[k] = x[i][k] - (s.a[k] + t * (s.b[k] - s.a[k]));
     const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     const double h = dist - s.radius - r1;
-    if (h >= law_.h_cut + 1e-3 * r1 || dist <= 0.0) continue;
+    if (h >= law_.h_cut + 1e-3 * r1 + travel(i) || dist <= 0.0) continue;
     int slot = -1;
     for (int b = 0; b < nbest; ++b)
       if (best_yarn[b] == s.yarn) slot = b;
@@ -526,6 +601,7 @@ void FixFiberYarns::post_force(int) {
   double **x = atom->x;
   local_[0] = local_[1] = 0.0;
   double gap_min = std::numeric_limits<double>::max();
+  if (implicit_ && !impulse_) land_.assign(6 * static_cast<size_t>(nlocal), 0.0);
   for (int i = 0; i < nlocal; ++i) {
     if (!(mask[i] & groupbit) || !beam_->is_node(i)) continue;
     double rr[4];
@@ -535,7 +611,7 @@ void FixFiberYarns::post_force(int) {
     for (const Plane &pl : planes_) {
       const double dist = (x[i][0] - pl.p[0]) * pl.n[0] + (x[i][1] - pl.p[1]) * pl.n[1] + (x[i][2] - pl.p[2]) * pl.n[2];
       const double h = dist - r1;
-      if (h < law_.h_cut + 1e-3 * r1) {
+      if (h < law_.h_cut + 1e-3 * r1 + travel(i)) {
         local_[1] += 1.0;
         apply_contact(i, pl.n.data(), h, r1, INFINITY, gap_min);
       }

@@ -11,7 +11,10 @@
        remove_every N      check for removal every N steps (default 100)
        settle V M          every M steps: count consecutive checks with max node speed < V (m/s)
        settle_measure node|fiber   node speeds (default) or fiber centre-of-mass speeds
-       substeps N          velocity-Verlet sub-steps per step for each contact (default 100)
+       integrator cvode|substep   contact sub-integration (default cvode, as pair_style fiber/dlvo)
+       implicit_force impulse|position  with implicit fibers: the averaged force handed to the step
+                           (default impulse: momentum exact, supports fibers leaning on yarns)
+       substeps N          velocity-Verlet sub-steps per step for `integrator substep` (default 100)
        friction mu         Coulomb friction coefficient against yarns and planes (default 0)
        terms LIST          comma list of vdw, es, steric (default steric)
        hamaker A | psi V | ionic_strength I | temperature T | eps_r e | h0 h | h_cut h |
@@ -24,6 +27,7 @@
 #include <vector>
 
 #include "fix.h"
+#include "contact_integrator.h"
 #include "physics/contact_law.h"
 
 namespace LAMMPS_NS {
@@ -52,6 +56,11 @@ class FixFiberYarns : public Fix {
   void node_yarn_contacts(int i, double r1, double &gap_min);
   void collect_segments(const double *p, std::vector<int> &out) const;
   void apply_friction(int i, int j, double s, const double n[3], double fn);
+  void normal_solve(const double p[3], const double v[3], const double a[3], double inv_m, const double n[3],
+                    double h, double r1, double r2, double &fpos, double &fvel);
+  double applied_force(double fpos, double fvel) const;
+  double travel(int i) const;
+  void land_velocity(int i, int j, double wi, double wj, const double n[3], double fc, double fv, double inv_m);
   long bin_key(int ix, int iy, int iz) const { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
 
   std::vector<Segment> segs_;
@@ -74,6 +83,14 @@ class FixFiberYarns : public Fix {
   std::vector<int> cand_;           // scratch: candidate yarn segments of one element
   double bin_reach_ = 0.0;          // reach of the bins beyond a yarn surface (set in init)
   bool sums_valid_ = false;
+  bool implicit_ = false;           // fix fiber/beam integrates implicitly (set in init)
+  double beta_eff_ = 0.5, gamma_eff_ = 1.0;  // its effective Newmark coefficients
+  fiberform::ContactIntegrator integ_;  // one CVODE memory / sub-stepper for all contacts
+  bool use_cvode_ = true;
+  bool impulse_ = true;             // apply the impulse average (explicit, or implicit default)
+  bool impulse_kw_ = true;          // keyword implicit_force impulse|position
+  double failures_ = 0;
+  std::vector<double> land_;        // implicit: per local atom velocity correction (3), force (3)
 };
 
 }  // namespace LAMMPS_NS

@@ -5,7 +5,9 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include "comm.h"
 #include "error.h"
+#include "lammps.h"
 
 namespace fiberform {
 
@@ -22,6 +24,20 @@ double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std
   if (end == text || *end != '\0' || !std::isfinite(v))
     error->all(FLERR, error_text(style + ": " + keyword + ": '" + text + "' is not a finite number"));
   return v;
+}
+
+void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *message) {
+  const char *text = error_text(message);
+  if (lmp->screen) {
+    std::fprintf(lmp->screen, "ERROR on proc %d: %s\n", lmp->comm->me, text);
+    std::fflush(lmp->screen);
+  }
+  if (lmp->logfile) {
+    std::fprintf(lmp->logfile, "ERROR on proc %d: %s\n", lmp->comm->me, text);
+    std::fflush(lmp->logfile);
+  }
+  lmp->error->one(file, line, text);
+  std::abort();  // not reached: Error::one aborts
 }
 
 }  // namespace fiberform

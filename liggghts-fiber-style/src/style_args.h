@@ -7,6 +7,7 @@
 
 namespace LAMMPS_NS {
 class Error;
+class LAMMPS;
 }
 
 namespace fiberform {
@@ -21,6 +22,11 @@ const char *error_text(const std::string &message);
 // "<style>: <keyword>: '<text>' is not a finite number".
 double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std::string &keyword,
                     const char *text);
+
+// error->one() for a condition found on one rank only, with the message written and FLUSHED to the
+// screen and log first: LIGGGHTS 3.8 calls MPI_Abort without flushing, so a message on a piped
+// screen (a run started by Python) or in the log file is otherwise lost.
+[[noreturn]] void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *message);
 
 }  // namespace fiberform
 

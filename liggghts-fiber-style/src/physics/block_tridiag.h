@@ -1,0 +1,139 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Block-tridiagonal linear solve with 6 x 6 blocks (one block row per fiber node): the Newton
+   systems of the implicit fiber step (physics/implicit_rod.h). Pure functions, no allocation
+   inside the solve (the caller passes the storage), O(n) work.
+
+   System: for k = 0..n-1
+       L_k x_{k-1} + D_k x_k + U_k x_{k+1} = r_k      (L_0 and U_{n-1} unused)
+   Blocks are row-major 6 x 6 (36 doubles). Block LU (Thomas algorithm) with partial pivoting
+   inside each diagonal block:
+       D'_0 = D_0,  D'_k = D_k - L_k G_{k-1},  G_k = D'_k^-1 U_k,  y_k = D'_k^-1 (r_k - L_k y_{k-1})
+       x_{n-1} = y_{n-1},  x_k = y_k - G_k x_{k+1}.
+   Stable without pivoting across blocks when the matrix is block diagonally dominant or
+   symmetric positive definite (the mass-dominated Newton matrices of small time steps are both;
+   large steps are made well conditioned by the symmetric diagonal scaling done by the caller).
+   Reference: G.H. Golub, C.F. Van Loan, Matrix Computations, 4th ed. (2013), sec. 4.5.1. */
+#ifndef FIBERFORM_PHYSICS_BLOCK_TRIDIAG_H
+#define FIBERFORM_PHYSICS_BLOCK_TRIDIAG_H
+
+#include <cmath>
+#include <cstddef>
+
+namespace fiberform::physics::blocktri {
+
+constexpr int kB = 6;       // block size
+constexpr int kBB = kB * kB;
+
+// In-place LU with partial pivoting of a 6 x 6 row-major matrix; piv receives the row order.
+// Returns false if a pivot is zero or not finite.
+inline bool lu6(double *a, int *piv) {
+  for (int i = 0; i < kB; ++i) piv[i] = i;
+  for (int c = 0; c < kB; ++c) {
+    int p = c;
+    double best = std::fabs(a[c * kB + c]);
+    for (int r = c + 1; r < kB; ++r) {
+      const double v = std::fabs(a[r * kB + c]);
+      if (v > best) {
+        best = v;
+        p = r;
+      }
+    }
+    if (!(best > 0.0) || !std::isfinite(best)) return false;
+    if (p != c) {
+      for (int k = 0; k < kB; ++k) {
+        const double t = a[c * kB + k];
+        a[c * kB + k] = a[p * kB + k];
+        a[p * kB + k] = t;
+      }
+      const int t = piv[c];
+      piv[c] = piv[p];
+      piv[p] = t;
+    }
+    const double inv = 1.0 / a[c * kB + c];
+    for (int r = c + 1; r < kB; ++r) {
+      const double l = a[r * kB + c] * inv;
+      a[r * kB + c] = l;
+      if (l != 0.0)
+        for (int k = c + 1; k < kB; ++k) a[r * kB + k] -= l * a[c * kB + k];
+    }
+  }
+  return true;
+}
+
+// Solves (LU) x = b for one right-hand side (b overwritten by x).
+inline void lu6_solve(const double *lu, const int *piv, double *b) {
+  double y[kB];
+  for (int i = 0; i < kB; ++i) y[i] = b[piv[i]];
+  for (int i = 0; i < kB; ++i)
+    for (int k = 0; k < i; ++k) y[i] -= lu[i * kB + k] * y[k];
+  for (int i = kB - 1; i >= 0; --i) {
+    for (int k = i + 1; k < kB; ++k) y[i] -= lu[i * kB + k] * y[k];
+    y[i] /= lu[i * kB + i];
+  }
+  for (int i = 0; i < kB; ++i) b[i] = y[i];
+}
+
+// Solves (LU) X = B for a 6 x 6 right-hand side B (row-major, overwritten by X).
+inline void lu6_solve_mat(const double *lu, const int *piv, double *B) {
+  double col[kB];
+  for (int c = 0; c < kB; ++c) {
+    for (int r = 0; r < kB; ++r) col[r] = B[r * kB + c];
+    lu6_solve(lu, piv, col);
+    for (int r = 0; r < kB; ++r) B[r * kB + c] = col[r];
+  }
+}
+
+// C -= A B (6 x 6)
+inline void sub_mul6(double *C, const double *A, const double *B) {
+  for (int i = 0; i < kB; ++i)
+    for (int k = 0; k < kB; ++k) {
+      const double a = A[i * kB + k];
+      if (a == 0.0) continue;
+      for (int j = 0; j < kB; ++j) C[i * kB + j] -= a * B[k * kB + j];
+    }
+}
+// y -= A x (6 x 6 times 6)
+inline void sub_mulv6(double *y, const double *A, const double *x) {
+  for (int i = 0; i < kB; ++i) {
+    double s = 0.0;
+    for (int k = 0; k < kB; ++k) s += A[i * kB + k] * x[k];
+    y[i] -= s;
+  }
+}
+
+/* Factors the block-tridiagonal matrix in place. n block rows; D, L, U: n blocks each (36 doubles
+   per block): D is overwritten by the LU factors of D'_k, U by G_k; L is kept. piv: 6 n ints.
+   Returns false if a diagonal block became singular. */
+inline bool factor(int n, double *D, const double *L, double *U, int *piv) {
+  for (int k = 0; k < n; ++k) {
+    double *Dk = D + static_cast<std::size_t>(k) * kBB;
+    if (k > 0) sub_mul6(Dk, L + static_cast<std::size_t>(k) * kBB, U + static_cast<std::size_t>(k - 1) * kBB);
+    int *pk = piv + static_cast<std::size_t>(k) * kB;
+    if (!lu6(Dk, pk)) return false;
+    if (k + 1 < n) lu6_solve_mat(Dk, pk, U + static_cast<std::size_t>(k) * kBB);  // G_k
+  }
+  return true;
+}
+
+/* Solves with the factors of factor(): rhs (6 n values) is overwritten by the solution. */
+inline void solve_factored(int n, const double *D, const double *L, const double *U, const int *piv, double *rhs) {
+  for (int k = 0; k < n; ++k) {
+    double *rk = rhs + static_cast<std::size_t>(k) * kB;
+    if (k > 0) sub_mulv6(rk, L + static_cast<std::size_t>(k) * kBB, rhs + static_cast<std::size_t>(k - 1) * kB);
+    lu6_solve(D + static_cast<std::size_t>(k) * kBB, piv + static_cast<std::size_t>(k) * kB, rk);
+  }
+  for (int k = n - 2; k >= 0; --k)
+    sub_mulv6(rhs + static_cast<std::size_t>(k) * kB, U + static_cast<std::size_t>(k) * kBB,
+              rhs + static_cast<std::size_t>(k + 1) * kB);
+}
+
+/* Factors and solves in one call (D, U overwritten as in factor(); rhs by the solution). */
+inline bool solve(int n, double *D, const double *L, double *U, double *rhs, int *piv) {
+  if (!factor(n, D, L, U, piv)) return false;
+  solve_factored(n, D, L, U, piv, rhs);
+  return true;
+}
+
+}  // namespace fiberform::physics::blocktri
+
+#endif

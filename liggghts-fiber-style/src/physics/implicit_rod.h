@@ -1,0 +1,447 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Implicit time step of one fiber (a chain of nodes joined by the Simo-Reissner elements of
+   physics/beam.h): the generalized-alpha scheme on the rotation group, solved by Newton's method
+   with a block-tridiagonal tangent. Pure functions/classes, SI units, no LIGGGHTS dependency.
+   Used by fix fiber/beam (`integrator implicit`); unit-tested in tests/test_implicit_rod.cpp;
+   documented in docs/models/beam.md ("Implicit time integration").
+
+   Scheme (M. Arnold, O. Bruels, Multibody Syst. Dyn. 18 (2007) 185-202; O. Bruels, A. Cardona,
+   M. Arnold, Mech. Mach. Theory 48 (2012) 121-137, "Lie group generalized-alpha"; the parameters
+   of J. Chung, G.M. Hulbert, J. Appl. Mech. 60 (1993) 371-375). Per node the configuration is
+   (x, R) in R^3 x SO(3), the velocities (v, W) with v spatial and W the BODY angular velocity,
+   R' = R W^. The equations of motion hold exactly at t_{n+1}:
+       m dv/dt            = F_int(x, R) + F_ext - D (v - v_n) - m v / tau
+       J dW/dt + W x J W  = R^T (T_int(x, R) + T_ext) - J W / tau
+   (F_ext, T_ext constant over the step: drag at t_n, gravity, contact averaged forces; D the
+   velocity Jacobian of the drag: linearly implicit drag; tau the optional background drag.)
+   Discretisation with pseudo-accelerations a (one per velocity component):
+       q_{n+1} = q_n o exp(h dQ),  dQ = v_n + h (1/2 - beta) a_n + h beta a_{n+1}
+       v_{n+1} = v_n + h (1 - gamma) a_n + h gamma a_{n+1}
+       (1 - am) a_{n+1} + am a_n = (1 - af) vdot_{n+1} + af vdot_n
+   with am = (2 rho - 1)/(rho + 1), af = rho/(rho + 1), gamma = 1/2 + af - am,
+   beta = (gamma + 1/2)^2 / 4: second order, unconditionally stable for linear problems, high
+   frequencies damped to the spectral radius rho_inf (1: no numerical dissipation, trapezoidal).
+   Newton corrections d (6 per node: dx spatial, dtheta body) update
+       dQ += d / h,  v += gamma' d,  vdot += beta' d,  gamma' = gamma/(h beta),
+       beta' = (1 - am)/(h^2 beta (1 - af)).
+   Iteration matrix S = beta' M + gamma' C_t + K_t (modified Newton: formed and factored at the
+   first iteration of a step and again after every kRefresh iterations without convergence), with K_t the tangent of the internal forces
+   by central differences of the exact discrete element forces (24 evaluations per element), C_t
+   the gyroscopic, drag and damping tangents, and the tangent operator of exp taken as identity
+   (rotation increments per step are small; Newton then converges linearly at a tiny rate instead
+   of quadratically). S is block tridiagonal in the nodes (6 x 6 blocks); it is solved after a
+   symmetric diagonal scaling by physics/block_tridiag.h.
+   A step whose iteration does not converge (tolerance on the corrections: translations relative
+   to the section radius, rotations in radians) or produces non-finite numbers is restarted from
+   the saved state as two half steps, recursively up to max_split levels; if that fails the step
+   reports failure (the caller stops the run: never silently accepted). */
+#ifndef FIBERFORM_PHYSICS_IMPLICIT_ROD_H
+#define FIBERFORM_PHYSICS_IMPLICIT_ROD_H
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <vector>
+
+#include "beam.h"
+#include "block_tridiag.h"
+
+namespace fiberform::physics::rod {
+
+using beam::Quat;
+using beam::Vec3;
+
+// Generalized-alpha parameters from the spectral radius at infinite frequency.
+struct GenAlpha {
+  double rho_inf = 0.5, am = 0, af = 0, gamma = 0.5, beta = 0.25;
+  // Effective Newmark coefficients of a force that is constant over one step and absent before:
+  // x_{n+1} changes by beta_eff h^2 F/m, v_{n+1} by gamma_eff h F/m.
+  double beta_eff() const { return beta * (1.0 - af) / (1.0 - am); }
+  double gamma_eff() const { return gamma * (1.0 - af) / (1.0 - am); }
+};
+inline GenAlpha gen_alpha(double rho_inf) {
+  GenAlpha g;
+  g.rho_inf = rho_inf;
+  g.am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0);
+  g.af = rho_inf / (rho_inf + 1.0);
+  g.gamma = 0.5 + g.af - g.am;
+  g.beta = 0.25 * (g.gamma + 0.5) * (g.gamma + 0.5);
+  return g;
+}
+
+struct Node {
+  // state at t_n on input, at t_{n+1} after a successful step
+  Vec3 x;          // position (m)
+  Quat q;          // frame (t_I = R(q) e_I)
+  Vec3 v;          // velocity, spatial (m/s)
+  Vec3 W;          // angular velocity, BODY frame (rad/s)
+  Vec3 ax, aw;     // pseudo-accelerations (generalized-alpha), translational spatial, rotational body
+  Vec3 vdx, vdw;   // accelerations dv/dt (spatial), dW/dt (body)
+  // constant over the step
+  double m = 0;    // mass (kg)
+  Vec3 J;          // principal rotary inertia about t1, t2, t3 (kg m^2)
+  Vec3 F, T;       // external force (N) and torque (N m), spatial
+  double D[6] = {0, 0, 0, 0, 0, 0};  // -dF/dv (N s/m): xx yy zz xy xz yz
+  double scale = 1e-5;               // length scale of the convergence test (m): the section radius
+  bool fixed = false;                // clamped: position and frame held
+  // outputs (end of step)
+  Vec3 Fint, Tint;  // internal (elastic + material damping) force and torque, spatial
+};
+
+struct Element {  // between node k and k+1
+  beam::ElementRef ref;
+  beam::Stiffness C;
+};
+
+struct Options {
+  double tol = 1e-8;      // convergence: max |dx|/scale and |dtheta| (rad) of the last correction
+  int max_iter = 25;      // Newton iterations per attempt
+  int max_split = 8;      // halvings of a step that does not converge
+  double t_damp = 0.0;    // Kelvin-Voigt damping time of the elements (s)
+  double tau_drag = 0.0;  // background drag time (s), 0 = off
+};
+
+struct Stats {
+  long iterations = 0;   // Newton iterations of this step (all attempts)
+  long tangents = 0;     // tangent formations and factorisations
+  int splits = 0;        // sub-steps beyond one (0: the step converged whole)
+  int depth = 0;         // deepest halving level used
+  bool ok = true;
+  double energy = 0;     // elastic energy at the end (J)
+  double dissipation = 0;
+};
+
+// Body-frame spatial helpers
+inline void skew(const Vec3 &a, double S[9]) {
+  S[0] = 0; S[1] = -a.z; S[2] = a.y;
+  S[3] = a.z; S[4] = 0; S[5] = -a.x;
+  S[6] = -a.y; S[7] = a.x; S[8] = 0;
+}
+
+class Stepper {
+ public:
+  static constexpr double kMaxTurn = 0.5;      // rad: largest rotation correction of one iteration
+  static constexpr double kMaxStepTurn = 1.0;  // rad: largest rotation of a node in one step
+  static constexpr int kRefresh = 4;           // iterations on one tangent before it is formed again
+  // Start of the integration. consistent = true: initial accelerations from all forces,
+  // vdot = (F_int + F)/m, J Wdot = R^T (T_int + T) - W x J W, a = vdot (exact start; use it when
+  // the step resolves every mode of the fiber). consistent = false: from the EXTERNAL loads only.
+  // With a step that does not resolve the stiff modes, the internal forces of a pre-stressed start
+  // would put h (1 - gamma) omega^2 x0 into the first velocities (measured 4.6e7 rad/s on a twisted
+  // 9-node fiber released at dt = 1e-5 s), which drag and contact would see. Starting from zero
+  // acceleration instead would leave a permanent velocity error (1 - gamma) h F/m. A fiber at rest
+  // in its stress-free shape (every generated fiber) starts exactly either way.
+  void initialise(std::vector<Node> &nodes, const std::vector<Element> &elems, const Options &opt,
+                  bool consistent = false) {
+    internal_forces(nodes, elems, opt, nullptr);
+    for (Node &nd : nodes) {
+      if (nd.fixed) {
+        nd.vdx = nd.vdw = nd.ax = nd.aw = Vec3{};
+        continue;
+      }
+      const Vec3 F = consistent ? nd.F + nd.Fint : nd.F;
+      const Vec3 T = consistent ? nd.T + nd.Tint : nd.T;
+      nd.vdx = (1.0 / nd.m) * F;
+      const Vec3 tb = beam::qrot_t(nd.q, T) - beam::cross(nd.W, beam::hadamard(nd.J, nd.W));
+      nd.vdw = {tb.x / nd.J.x, tb.y / nd.J.y, tb.z / nd.J.z};
+      nd.ax = nd.vdx;
+      nd.aw = nd.vdw;
+    }
+  }
+
+  // One step of length h. On failure the nodes are left at their input state and ok = false.
+  Stats step(std::vector<Node> &nodes, const std::vector<Element> &elems, double h, const GenAlpha &g,
+             const Options &opt) {
+    Stats st;
+    saved_ = nodes;
+    st.ok = advance(nodes, elems, h, g, opt, 0, st);
+    if (!st.ok) nodes = saved_;
+    return st;
+  }
+
+  // Internal forces/torques of all nodes at their current state into Fint/Tint (and energy).
+  static void internal_forces(std::vector<Node> &nodes, const std::vector<Element> &elems, const Options &opt,
+                              Stats *st) {
+    for (Node &nd : nodes) nd.Fint = nd.Tint = Vec3{};
+    for (std::size_t e = 0; e < elems.size(); ++e) {
+      Node &A = nodes[e], &B = nodes[e + 1];
+      const beam::ElementForces f =
+          beam::element_forces(state(A), state(B), elems[e].ref, elems[e].C, opt.t_damp);
+      A.Fint = A.Fint + f.fA;
+      A.Tint = A.Tint + f.tA;
+      B.Fint = B.Fint + f.fB;
+      B.Tint = B.Tint + f.tB;
+      if (st) {
+        st->energy += f.energy;
+        st->dissipation += f.dissipation;
+      }
+    }
+  }
+
+ private:
+  static beam::NodeState state(const Node &n) {
+    beam::NodeState s;
+    s.x = n.x;
+    s.q = n.q;
+    s.v = n.v;
+    s.w = beam::qrot(n.q, n.W);
+    return s;
+  }
+
+  // 12 residual components of one element's internal forces (sign: -force, rotations in the body
+  // frame of each node).
+  static void element_residual(const beam::NodeState &A, const beam::NodeState &B, const Element &el,
+                               double t_damp, double out[12]) {
+    const beam::ElementForces f = beam::element_forces(A, B, el.ref, el.C, t_damp);
+    const Vec3 ta = beam::qrot_t(A.q, f.tA), tb = beam::qrot_t(B.q, f.tB);
+    const Vec3 parts[4] = {f.fA, ta, f.fB, tb};
+    for (int p = 0; p < 4; ++p)
+      for (int c = 0; c < 3; ++c) out[3 * p + c] = -parts[p][c];
+  }
+
+  // Element tangent (12 x 12, row-major) d(residual)/d(dx_A, dth_A, dx_B, dth_B) by central
+  // differences (translations spatial, rotations body-frame right perturbations).
+  static void element_tangent(const beam::NodeState &A, const beam::NodeState &B, const Element &el,
+                              double t_damp, double K[144]) {
+    const double hx = 1e-7 * el.ref.L0;  // m
+    const double hr = 1e-7;              // rad
+    double rp[12], rm[12];
+    for (int c = 0; c < 12; ++c) {
+      beam::NodeState Ap = A, Am = A, Bp = B, Bm = B;
+      beam::NodeState &P = c < 6 ? Ap : Bp;
+      beam::NodeState &M = c < 6 ? Am : Bm;
+      const int k = c % 6;
+      double step;
+      if (k < 3) {
+        step = hx;
+        P.x[k] += hx;
+        M.x[k] -= hx;
+      } else {
+        step = hr;
+        Vec3 d{};
+        d[k - 3] = hr;
+        P.q = beam::qmul(P.q, beam::qexp(d));
+        M.q = beam::qmul(M.q, beam::qexp(-1.0 * d));
+      }
+      element_residual(Ap, Bp, el, t_damp, rp);
+      element_residual(Am, Bm, el, t_damp, rm);
+      const double inv = 0.5 / step;
+      for (int r = 0; r < 12; ++r) K[r * 12 + c] = (rp[r] - rm[r]) * inv;
+    }
+  }
+
+  void set_positions(std::vector<Node> &nodes, const std::vector<Node> &start, double h) {
+    for (std::size_t k = 0; k < nodes.size(); ++k) {
+      if (nodes[k].fixed) continue;
+      nodes[k].x = start[k].x + h * dQx_[k];
+      nodes[k].q = beam::qnormalize(beam::qmul(start[k].q, beam::qexp(h * dQw_[k])));
+    }
+  }
+
+  bool advance(std::vector<Node> &nodes, const std::vector<Element> &elems, double h, const GenAlpha &g,
+               const Options &opt, int depth, Stats &st) {
+    st.depth = std::max(st.depth, depth);
+    const std::vector<Node> start = nodes;
+    if (attempt(nodes, start, elems, h, g, opt, st)) return true;
+    if (depth >= opt.max_split) return false;
+    nodes = start;
+    ++st.splits;
+    if (!advance(nodes, elems, 0.5 * h, g, opt, depth + 1, st)) return false;
+    return advance(nodes, elems, 0.5 * h, g, opt, depth + 1, st);
+  }
+
+  bool attempt(std::vector<Node> &nodes, const std::vector<Node> &start, const std::vector<Element> &elems,
+               double h, const GenAlpha &g, const Options &opt, Stats &st) {
+    const std::size_t n = nodes.size();
+    const double bp = (1.0 - g.am) / (h * h * g.beta * (1.0 - g.af));
+    const double gp = g.gamma / (h * g.beta);
+    const double inv_tau = opt.tau_drag > 0 ? 1.0 / opt.tau_drag : 0.0;
+    dQx_.assign(n, Vec3{});
+    dQw_.assign(n, Vec3{});
+    // predictor: the nodes stay where they are (dQ = 0), the other quantities from the scheme's
+    // relations. (Extrapolating the acceleration or the velocity instead can rotate a node of tiny
+    // rotary inertia by more than pi in one large step: the exponential map then aliases and Newton
+    // converges to a spurious branch spinning at 2 pi k / h.)
+    for (std::size_t k = 0; k < n; ++k) {
+      Node &nd = nodes[k];
+      const Node &s = start[k];
+      if (nd.fixed) {
+        nd.v = nd.W = nd.vdx = nd.vdw = Vec3{};
+        continue;
+      }
+      const Vec3 ax1 = (-1.0 / (h * g.beta)) * (s.v + (h * (0.5 - g.beta)) * s.ax);
+      const Vec3 aw1 = (-1.0 / (h * g.beta)) * (s.W + (h * (0.5 - g.beta)) * s.aw);
+      nd.v = s.v + h * ((1.0 - g.gamma) * s.ax + g.gamma * ax1);
+      nd.W = s.W + h * ((1.0 - g.gamma) * s.aw + g.gamma * aw1);
+      nd.vdx = (1.0 / (1.0 - g.af)) * ((1.0 - g.am) * ax1 + g.am * s.ax - g.af * s.vdx);
+      nd.vdw = (1.0 / (1.0 - g.af)) * ((1.0 - g.am) * aw1 + g.am * s.aw - g.af * s.vdw);
+      dQx_[k] = dQw_[k] = Vec3{};
+    }
+    set_positions(nodes, start, h);
+
+    Dm_.assign(n * blocktri::kBB, 0.0);
+    Lm_.assign(n * blocktri::kBB, 0.0);
+    Um_.assign(n * blocktri::kBB, 0.0);
+    rhs_.assign(n * 6, 0.0);
+    piv_.assign(n * 6, 0);
+    scale_.assign(n * 6, 1.0);
+    double Ke[144], re[12];
+    int since_tangent = 0;
+    for (int it = 0; it < opt.max_iter; ++it) {
+      ++st.iterations;
+      // modified Newton: the tangent is formed and factored at the first iteration and again
+      // whenever kRefresh iterations have not converged
+      const bool tangent = it == 0 || since_tangent >= kRefresh;
+      since_tangent = tangent ? 1 : since_tangent + 1;
+      if (tangent) {
+        ++st.tangents;
+        std::fill(Dm_.begin(), Dm_.end(), 0.0);
+        std::fill(Lm_.begin(), Lm_.end(), 0.0);
+        std::fill(Um_.begin(), Um_.end(), 0.0);
+      }
+      std::fill(rhs_.begin(), rhs_.end(), 0.0);
+      // internal forces (and their tangent)
+      for (std::size_t e = 0; e + 1 < n; ++e) {
+        const beam::NodeState A = state(nodes[e]), B = state(nodes[e + 1]);
+        element_residual(A, B, elems[e], opt.t_damp, re);
+        for (int r = 0; r < 6; ++r) {
+          rhs_[e * 6 + r] += re[r];
+          rhs_[(e + 1) * 6 + r] += re[6 + r];
+        }
+        if (!tangent) continue;
+        element_tangent(A, B, elems[e], opt.t_damp, Ke);
+        const double kfac = 1.0 + gp * opt.t_damp;  // Kelvin-Voigt: damping tangent ~ t_d K
+        for (int r = 0; r < 6; ++r)
+          for (int c = 0; c < 6; ++c) {
+            Dm_[e * 36 + r * 6 + c] += kfac * Ke[r * 12 + c];
+            Um_[e * 36 + r * 6 + c] += kfac * Ke[r * 12 + 6 + c];
+            Lm_[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + c];
+            Dm_[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + 6 + c];
+          }
+      }
+      // inertia, external forces, drag
+      for (std::size_t k = 0; k < n; ++k) {
+        Node &nd = nodes[k];
+        const Node &s = start[k];
+        double *Dk = &Dm_[k * 36];
+        double *rk = &rhs_[k * 6];
+        if (nd.fixed) {
+          for (int i = 0; i < 6; ++i) rk[i] = 0.0;
+          if (tangent) {
+            for (int i = 0; i < 36; ++i) Dk[i] = Um_[k * 36 + i] = Lm_[k * 36 + i] = 0.0;
+            for (int i = 0; i < 6; ++i) Dk[i * 7] = 1.0;
+          }
+          continue;
+        }
+        // translation: m vdot - F_ext + D (v - v_n) + m v / tau
+        const Vec3 dv = nd.v - s.v;
+        const double *D = nd.D;
+        const Vec3 Ddv{D[0] * dv.x + D[3] * dv.y + D[4] * dv.z, D[3] * dv.x + D[1] * dv.y + D[5] * dv.z,
+                       D[4] * dv.x + D[5] * dv.y + D[2] * dv.z};
+        const Vec3 rx = nd.m * nd.vdx - nd.F + Ddv + (nd.m * inv_tau) * nd.v;
+        // rotation (body): J Wdot + W x J W - R^T T_ext + J W / tau
+        const Vec3 JW = beam::hadamard(nd.J, nd.W);
+        const Vec3 b = beam::qrot_t(nd.q, nd.T);
+        const Vec3 rw = beam::hadamard(nd.J, nd.vdw) + beam::cross(nd.W, JW) - b + inv_tau * JW;
+        for (int i = 0; i < 3; ++i) {
+          rk[i] += rx[i];
+          rk[3 + i] += rw[i];
+        }
+        if (!tangent) continue;
+        const double Dfull[9] = {D[0], D[3], D[4], D[3], D[1], D[5], D[4], D[5], D[2]};
+        double SW[9], SJW[9], Sb[9];
+        skew(nd.W, SW);
+        skew(JW, SJW);
+        skew(b, Sb);
+        for (int i = 0; i < 3; ++i) {
+          Dk[i * 6 + i] += bp * nd.m + gp * nd.m * inv_tau;
+          Dk[(3 + i) * 6 + 3 + i] += bp * nd.J[i] + gp * inv_tau * nd.J[i];
+          for (int j = 0; j < 3; ++j) {
+            Dk[i * 6 + j] += gp * Dfull[i * 3 + j];
+            Dk[(3 + i) * 6 + 3 + j] += gp * (SW[i * 3 + j] * nd.J[j] - SJW[i * 3 + j]) - Sb[i * 3 + j];
+          }
+        }
+      }
+      if (tangent) {
+        // symmetric diagonal scaling, then the block factorisation
+        for (std::size_t k = 0; k < n; ++k)
+          for (int i = 0; i < 6; ++i) {
+            const double dii = std::fabs(Dm_[k * 36 + i * 7]);
+            scale_[k * 6 + i] = dii > 0 && std::isfinite(dii) ? 1.0 / std::sqrt(dii) : 1.0;
+          }
+        for (std::size_t k = 0; k < n; ++k) {
+          const double *sk = &scale_[k * 6];
+          const double *sp = k > 0 ? &scale_[(k - 1) * 6] : sk;
+          const double *sn = k + 1 < n ? &scale_[(k + 1) * 6] : sk;
+          for (int i = 0; i < 6; ++i)
+            for (int j = 0; j < 6; ++j) {
+              Dm_[k * 36 + i * 6 + j] *= sk[i] * sk[j];
+              Lm_[k * 36 + i * 6 + j] *= sk[i] * sp[j];
+              Um_[k * 36 + i * 6 + j] *= sk[i] * sn[j];
+            }
+        }
+        if (!blocktri::factor(static_cast<int>(n), Dm_.data(), Lm_.data(), Um_.data(), piv_.data())) return false;
+      }
+      // solve S d = -r with the (possibly older) factors
+      for (std::size_t q = 0; q < n * 6; ++q) rhs_[q] *= -scale_[q];
+      blocktri::solve_factored(static_cast<int>(n), Dm_.data(), Lm_.data(), Um_.data(), piv_.data(), rhs_.data());
+      // update; a correction that would rotate a node by more than kMaxTurn is shortened (damped
+      // Newton), and a step that turns a node by more than kMaxStepTurn fails (and is split)
+      double err = 0.0, turn = 0.0;
+      for (std::size_t k = 0; k < n; ++k) {
+        double t2 = 0.0;
+        for (int i = 0; i < 3; ++i) t2 += std::pow(rhs_[k * 6 + 3 + i] * scale_[k * 6 + 3 + i], 2);
+        turn = std::max(turn, std::sqrt(t2));
+      }
+      if (!std::isfinite(turn)) return false;
+      const double damp = turn > kMaxTurn ? kMaxTurn / turn : 1.0;
+      for (std::size_t k = 0; k < n; ++k) {
+        Node &nd = nodes[k];
+        if (nd.fixed) continue;
+        Vec3 dx, dth;
+        for (int i = 0; i < 3; ++i) {
+          dx[i] = damp * rhs_[k * 6 + i] * scale_[k * 6 + i];
+          dth[i] = damp * rhs_[k * 6 + 3 + i] * scale_[k * 6 + 3 + i];
+        }
+        if (!std::isfinite(dx.x + dx.y + dx.z + dth.x + dth.y + dth.z)) return false;
+        err = std::max(err, std::max(beam::norm(dx) / nd.scale, beam::norm(dth)));
+        dQx_[k] = dQx_[k] + (1.0 / h) * dx;
+        dQw_[k] = dQw_[k] + (1.0 / h) * dth;
+        nd.v = nd.v + gp * dx;
+        nd.W = nd.W + gp * dth;
+        nd.vdx = nd.vdx + bp * dx;
+        nd.vdw = nd.vdw + bp * dth;
+      }
+      set_positions(nodes, start, h);
+      if (damp < 1.0 || !(err <= opt.tol)) continue;
+      for (std::size_t k = 0; k < n; ++k)
+        if (h * beam::norm(dQw_[k]) > kMaxStepTurn) return false;
+      // converged: end-of-step outputs and pseudo-accelerations
+      Stats tmp;
+      internal_forces(nodes, elems, opt, &tmp);
+      st.energy = tmp.energy;
+      st.dissipation = tmp.dissipation;
+      for (std::size_t k = 0; k < n; ++k) {
+        Node &nd = nodes[k];
+        const Node &s = start[k];
+        if (nd.fixed) continue;
+        nd.ax = (1.0 / (1.0 - g.am)) * ((1.0 - g.af) * nd.vdx + g.af * s.vdx - g.am * s.ax);
+        nd.aw = (1.0 / (1.0 - g.am)) * ((1.0 - g.af) * nd.vdw + g.af * s.vdw - g.am * s.aw);
+        const double big = std::fabs(nd.x.x) + std::fabs(nd.v.x + nd.v.y + nd.v.z) +
+                           std::fabs(nd.W.x + nd.W.y + nd.W.z);
+        if (!std::isfinite(big)) return false;
+      }
+      return true;
+    }
+    return false;
+  }
+
+  std::vector<Node> saved_;
+  std::vector<Vec3> dQx_, dQw_;
+  std::vector<double> Dm_, Lm_, Um_, rhs_, scale_;
+  std::vector<int> piv_;
+};
+
+}  // namespace fiberform::physics::rod
+
+#endif
