@@ -75,6 +75,7 @@ class Case:
     G: float = G_WALL
     rho: float = RHO
     integrator: str = "explicit"  # fix fiber/beam integrator: "explicit" or "implicit"
+    newton: str = "off"           # LIGGGHTS newton setting ("on" for pair_style fiber/dlvo)
 
 
 @dataclass
@@ -95,7 +96,7 @@ def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
     skin = float(0.1 * max(np.max(f.radii[:, :2]) for f in case.fibers))
     lines = [
         "units si", "atom_style sphere", "atom_modify map array sort 0 0.0", f"boundary {case.boundary}",
-        "newton off", "communicate single vel yes", f"processors {case.processors}",
+        f"newton {'on' if case.newton == 'on' else 'off'}", "communicate single vel yes", f"processors {case.processors}",
         "read_data data.fib", f"neighbor {skin!r} bin", "neigh_modify delay 0", *pre_fix,
         f"fix beam all fiber/beam nodes nodes.fib E {case.E!r} G {case.G!r} density {case.rho!r} "
         f"shear_factor {KSHEAR!r} integrator {case.integrator} {case.fix_options}",

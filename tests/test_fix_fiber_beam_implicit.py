@@ -310,3 +310,97 @@ def test_adhesion_4_1_2_implicit(tmp_path: Path, v0: float, attached: bool) -> N
     p0 = -pf.M_FIBER * pf.L_SHORT / pf.L * v0
     assert np.all(np.abs(out["v_px"] - p0) <= 1e-6 * abs(p0))
     assert np.all(out["v_kin"] <= pf._ke0(v0, pf.L_SHORT) + pf._attractive_work_bound(pf.L_SHORT))
+
+
+# ------------------------------------------------------------------------------------------------
+# stability: dt from 1e-7 to 1e-4 s, thin and thick fibers, short and long elements, falling in
+# drag onto a plane (fix wall/fiber/dlvo) and onto a crossing fiber (pair_style fiber/dlvo)
+
+def _crossing_pair(width: float, element: float) -> list:
+    """Two straight 10-element fibers crossing at right angles above the plane z = 0: the lower
+    along x at a surface gap of 0.5 um from the plane, the upper along y 0.5 um above it."""
+    from fiberform.fiber_io import quat_from_frames
+
+    r = width / 2
+    n = 11
+    L = 10 * element
+    fibs = []
+    for k, (axis, z) in enumerate([(0, r + 0.5e-6), (1, 3 * r + 1.0e-6)]):
+        fib = straight_chain(n, L, [r, r, 0, 0])
+        x = np.zeros((n, 3))
+        x[:, axis] = np.linspace(-L / 2, L / 2, n)
+        x[:, 2] = z
+        t3 = np.zeros((n, 3))
+        t3[:, axis] = 1.0
+        t1 = np.zeros((n, 3))
+        t1[:, 1 - axis] = 1.0
+        t2 = np.cross(t3, t1)
+        fib.x = x
+        fib.q = quat_from_frames(t1, t2, t3)
+        fibs.append(fib)
+    return fibs
+
+
+@pytest.mark.parametrize("dt", [1e-7, 1e-6, 1e-5, 1e-4])
+@pytest.mark.parametrize("width,element", [(10e-6, 20e-6), (100e-6, 200e-6)])
+@pytest.mark.parametrize("drag", ["yes", "no"])
+def test_stability_free_fall_and_drag(fiberdem_build: Path, tmp_path: Path, dt: float, width: float,
+                                      element: float, drag: str) -> None:
+    """A bent fiber (5 % of its length) released in quiescent water with drag (linearly implicit)
+    or falling freely, 300 steps: no NaN, no blow-up: the fiber's energy (elastic + kinetic) never
+    exceeds its initial value plus the work gravity (minus buoyancy) can have done on the
+    centre-of-mass drop; free fall: the centre of mass falls at g_eff t within 1 %."""
+    L = 10 * element
+    fib = straight_chain(11, L, [width / 2, width / 2, 0, 0], origin=(0.0, 0.0, -L / 2))
+    s = np.linspace(0, 1, 11)
+    start = bent_state(fib, 0.05 * L * np.sin(math.pi * s), 0.05 * math.pi * np.cos(math.pi * s))
+    steps = 300
+    case = implicit_case([start], [-L, -L, -1.0], [L, L, 1.0], dt=dt, steps=steps,
+                         commands=[f"fix drag all fiber/drag flow uniform 0 0 0 drag {drag}"],
+                         thermo_every=steps // 3)
+    res = run_case(fiberdem_build, tmp_path, case)
+    fin = res.final
+    assert np.all(np.isfinite(fin[:, 1:7])) and np.all(np.isfinite(res.thermo))
+    g_eff = 9.81 * (1500.0 - 998.2) / 1500.0
+    w = np.ones(11)
+    w[0] = w[-1] = 0.5                       # end nodes carry half an element's mass
+    mass = 1500.0 * math.pi * (width / 2) ** 2 * L
+    drop = float(np.sum(w * (start.x_init[:, 2] - fin[:, 3])) / np.sum(w))
+    e0, e_end = res.thermo[0, 2], res.thermo[-1, 2]
+    assert e_end <= e0 * (1 + 1e-6) + mass * g_eff * max(drop, 0.0) * (1 + 1e-3) + 1e-30, (e0, e_end)
+    if drag == "no":
+        vcom = float(np.sum(w * fin[:, 6]) / np.sum(w))
+        assert vcom == pytest.approx(-g_eff * dt * steps, rel=0.01)
+
+
+@pytest.mark.parametrize("dt", [1e-7, 1e-6, 1e-5])
+@pytest.mark.parametrize("width,element", [(10e-6, 20e-6), (100e-6, 200e-6)])
+def test_stability_drag_plane_and_fiber_contact(fiberdem_build: Path, tmp_path: Path, dt: float,
+                                                width: float, element: float) -> None:
+    """No NaN, no blow-up (every node slower than 3x the flow speed), no pass-through of the
+    plane (every node centre above it) or of the other fiber (the upper fiber stays above the
+    lower one where they cross), after the fibers have reached each other and the plane.
+    Not at 1e-4 s: there the thin fiber passed through the other one and the thick case took
+    9 minutes of CVODE work (measured; docs/models/beam.md)."""
+    fibs = _crossing_pair(width, element)
+    L = 10 * element
+    r = width / 2
+    u_flow = 0.02  # m/s downwards
+    steps = 300
+    case = implicit_case(
+        fibs, [-0.6 * L, -0.6 * L, -r], [0.6 * L, 0.6 * L, 6 * r + 5e-6], dt=dt, steps=steps, newton="on",
+        commands=[f"fix drag all fiber/drag flow uniform 0 0 {-u_flow!r}",
+                  "fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms steric",
+                  "pair_style fiber/dlvo integrator cvode terms steric", "pair_coeff * *"],
+        thermo_every=steps // 3)
+    res = run_case(fiberdem_build, tmp_path, case)
+    fin = res.final
+    assert np.all(np.isfinite(fin[:, 1:7]))
+    speed = np.linalg.norm(fin[:, 4:7], axis=1)
+    assert speed.max() < 3 * u_flow, speed.max()
+    assert fin[:, 3].min() > 0.0, fin[:, 3].min()  # node centres above the plane
+    lower, upper = fin[:11], fin[11:]
+    # where they cross (the middle nodes), the upper fiber's centre is above the lower one's
+    assert upper[5, 3] > lower[5, 3] + r, (upper[5, 3], lower[5, 3])
+    # they did fall onto each other/the plane: the upper fiber moved down by at least its gap
+    assert upper[5, 3] < 3 * r + 1.0e-6 + 1e-7 or dt * steps < 1e-4

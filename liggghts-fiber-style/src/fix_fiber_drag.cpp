@@ -71,6 +71,12 @@ FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       need(3);
       for (int k = 0; k < 3; ++k) g_[k] = fiberform::parse_finite(error, "fix fiber/drag", "gravity", arg[iarg + 1 + k]);
       iarg += 4;
+    } else if (kw == "implicit") {
+      need(1);
+      const std::string v = arg[iarg + 1];
+      if (v != "yes" && v != "no") error->all(FLERR, "fix fiber/drag: implicit: expected yes or no");
+      implicit_ = v == "yes";
+      iarg += 2;
     } else if (kw == "drag") {
       need(1);
       const std::string v = arg[iarg + 1];
@@ -79,7 +85,7 @@ FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       iarg += 2;
     } else {
       error->all(FLERR, fiberform::error_text("fix fiber/drag: unknown keyword '" + kw +
-                                "' (flow, fluid_density, viscosity, gravity, drag)"));
+                                "' (flow, fluid_density, viscosity, gravity, drag, implicit)"));
     }
   }
   if (!flow_) error->all(FLERR, "fix fiber/drag: the keyword 'flow uniform ux uy uz' or 'flow grid FILE' is required");
@@ -102,7 +108,7 @@ void FixFiberDrag::setup(int vflag) { post_force(vflag); }
 
 /* Drag on the element i -> j (eq. 2.14 at the centre, mean diameter), returned in fe (N, the
    whole element); the return value is the element's displaced (wall) volume (m3). */
-double FixFiberDrag::element_force(int i, int j, double fe[3]) const {
+double FixFiberDrag::element_force(int i, int j, double fe[3], double *jac) const {
   double **x = atom->x, **v = atom->v;
   double ri[4], rj[4];
   beam_->section_radii(i, ri);
@@ -124,6 +130,12 @@ double FixFiberDrag::element_force(int i, int j, double fe[3]) const {
     const drag::Vec3 vrel{u[0] - vc[0], u[1] - vc[1], u[2] - vc[2]};
     const drag::Vec3 f = drag::drag_per_length(rho_f_, mu_, d, vrel);
     for (int k = 0; k < 3; ++k) fe[k] = f[k] * len;
+    if (jac) {
+      const auto J = drag::drag_jacobian(rho_f_, mu_, d, vrel);
+      for (int k = 0; k < 6; ++k) jac[k] = J[k] * len;
+    }
+  } else if (jac) {
+    for (int k = 0; k < 6; ++k) jac[k] = 0.0;
   }
   return area * len;
 }
@@ -134,20 +146,28 @@ void FixFiberDrag::post_force(int) {
   double **f = atom->f;
   double *rmass = atom->rmass;
   for (double &s : local_) s = 0.0;
+  // implicit fibers: each node also gets the row-sum-lumped velocity Jacobian of its drag,
+  // D_i = sum over its elements of (len/2) df/du (the node's half of the element force changes by
+  // -(len/2) df/du dv when both nodes move together), so fix fiber/beam treats drag linearly
+  // implicitly: stable at any step (the relaxation time m/(dF/dv) of a 10 um fiber is ~3e-5 s)
+  const bool jacobian = implicit_ && drag_on_ && beam_->implicit();
   for (int i = 0; i < nlocal; ++i) {
     if (!(mask[i] & groupbit) || !beam_->is_node(i)) continue;
     const int idx = beam_->node_index(i), cnt = beam_->node_count(i);
-    double volume = 0.0, fi[3] = {0.0, 0.0, 0.0};
+    double volume = 0.0, fi[3] = {0.0, 0.0, 0.0}, Di[6] = {0, 0, 0, 0, 0, 0};
     // every element is evaluated by the owners of both of its nodes, each keeping its half:
     // no reverse communication, and both halves are bit-identical
     for (int side = 0; side < 2; ++side) {
       if ((side == 0 && idx == 0) || (side == 1 && idx == cnt - 1)) continue;
       const int j = atom->map(atom->tag[i] + (side == 0 ? -1 : 1));
       if (j < 0) error->one(FLERR, "fix fiber/drag: neighbour node not found (ghost cut-off too short?)");
-      double fe[3];
-      const double ve = side == 0 ? element_force(j, i, fe) : element_force(i, j, fe);
+      double fe[3], je[6];
+      const double ve = side == 0 ? element_force(j, i, fe, jacobian ? je : nullptr)
+                                  : element_force(i, j, fe, jacobian ? je : nullptr);
       volume += 0.5 * ve;
       for (int k = 0; k < 3; ++k) fi[k] += 0.5 * fe[k];
+      if (jacobian)
+        for (int k = 0; k < 6; ++k) Di[k] += 0.5 * je[k];
       if (side == 1) {
         local_[6] += 1.0;
         for (int k = 0; k < 3; ++k) local_[k] += fe[k];
@@ -158,6 +178,7 @@ void FixFiberDrag::post_force(int) {
       f[i][k] += fi[k] + body;
       local_[3 + k] += body;
     }
+    if (jacobian) beam_->add_velocity_jacobian(i, Di);
   }
   sums_valid_ = false;
 }

@@ -9,6 +9,8 @@
        viscosity mu           Pa s (default 1e-3)
        gravity gx gy gz       m/s2 (default 0 0 -9.81)
        drag yes|no            fluid drag on/off (default yes)
+       implicit yes|no        with implicit fix fiber/beam: hand the drag's velocity Jacobian to the
+                              Newton solve (linearly implicit drag; default yes) or lag it (no)
 
    The velocity field is a fiberform::physics::flow::FlowField (physics/flow_grid.h): a uniform
    vector or the frozen grid written by `fiberform flow`; a coupled field can replace it. */
@@ -39,12 +41,14 @@ class FixFiberDrag : public Fix {
   void set_flow(std::unique_ptr<fiberform::physics::flow::FlowField> flow);
 
  private:
-  double element_force(int i, int j, double fe[3]) const;
+  // drag on element i -> j into fe (N); jac (optional): its Jacobian df/du times the length (N s/m)
+  double element_force(int i, int j, double fe[3], double *jac = nullptr) const;
 
   std::unique_ptr<fiberform::physics::flow::FlowField> flow_;
   double rho_f_ = 998.2, mu_ = 1.0e-3;
   double g_[3] = {0.0, 0.0, -9.81};
   bool drag_on_ = true;
+  bool implicit_ = true;
   class FixFiberBeam *beam_ = nullptr;
   double sums_[7] = {0, 0, 0, 0, 0, 0, 0};  // drag xyz (N), gravity+buoyancy xyz (N), elements
   bool sums_valid_ = false;

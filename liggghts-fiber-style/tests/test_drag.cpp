@@ -65,6 +65,47 @@ int main() {
   expect_rel(u, 1.420695405704801e-03, 1e-10, "balance speed");
   expect_rel(dr::drag_per_length_magnitude(998.2, 1.002e-3, d, u), -w[2], 1e-10, "balance");
 
+  // Jacobian of eq. 2.14 vs central differences of drag_per_length, all three Re branches, a few
+  // directions; positive definite (a symmetric matrix with a positive smallest eigenvalue).
+  for (double speed : {1e-3, 0.2, 1.5, 30.0}) {  // d = 30 um in water: Re 0.03, 6, 45, 900
+    for (const dr::Vec3 dir : {dr::Vec3{1, 0, 0}, dr::Vec3{0.6, -0.8, 0}, dr::Vec3{0.48, 0.6, -0.64}}) {
+      const dr::Vec3 u{speed * dir[0], speed * dir[1], speed * dir[2]};
+      const auto J = dr::drag_jacobian(998.2, 1.002e-3, d, u);
+      const double full[3][3] = {{J[0], J[3], J[4]}, {J[3], J[1], J[5]}, {J[4], J[5], J[2]}};
+      double scale = 0.0;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) scale = std::fmax(scale, std::fabs(full[r][c]));
+      double err = 0.0;
+      for (int c = 0; c < 3; ++c) {
+        const double h = 1e-6 * speed;
+        dr::Vec3 up = u, um = u;
+        up[c] += h;
+        um[c] -= h;
+        const auto fp = dr::drag_per_length(998.2, 1.002e-3, d, up);
+        const auto fm = dr::drag_per_length(998.2, 1.002e-3, d, um);
+        for (int r = 0; r < 3; ++r) err = std::fmax(err, std::fabs((fp[r] - fm[r]) / (2 * h) - full[r][c]));
+      }
+      if (!(err <= 1e-6 * scale)) {
+        std::fprintf(stderr, "FAIL: drag Jacobian vs finite differences at %g m/s: %g (scale %g)\n", speed, err, scale);
+        ++failures;
+      }
+      // positive definite: leading principal minors
+      const double m1 = full[0][0], m2 = full[0][0] * full[1][1] - full[0][1] * full[1][0];
+      const double m3 = full[0][0] * (full[1][1] * full[2][2] - full[1][2] * full[2][1]) -
+                        full[0][1] * (full[1][0] * full[2][2] - full[1][2] * full[2][0]) +
+                        full[0][2] * (full[1][0] * full[2][1] - full[1][1] * full[2][0]);
+      if (!(m1 > 0 && m2 > 0 && m3 > 0)) {
+        std::fprintf(stderr, "FAIL: drag Jacobian not positive definite at %g m/s\n", speed);
+        ++failures;
+      }
+    }
+  }
+  const auto J0 = dr::drag_jacobian(998.2, 1.002e-3, d, {0.0, 0.0, 0.0});
+  if (J0[0] != 0.0 || J0[1] != 0.0 || J0[2] != 0.0) {
+    std::fprintf(stderr, "FAIL: drag Jacobian at zero relative velocity\n");
+    ++failures;
+  }
+
   std::printf("test_drag: %s\n", failures ? "FAILED" : "ok");
   return failures ? 1 : 0;
 }

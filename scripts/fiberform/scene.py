@@ -691,12 +691,29 @@ class LaydownSection(_Section):
         le=100000,
     )  # fmt: skip
     inertia_scale: float = quantity(
-        "fix fiber/beam inertia_scale (rotary inertia factor; speed option)", "1",
-        default=1.0e4, gt=0.0, le=1e8,
+        "fix fiber/beam inertia_scale (rotary inertia factor; speed option, 1 = real inertia)", "1",
+        default=1.0, gt=0.0, le=1e8,
     )  # fmt: skip
     stiffness_scale: float = quantity(
-        "fix fiber/beam stiffness_scale (EA, GA factor; speed option)", "1", default=0.01,
-        gt=0.0, le=1.0,
+        "fix fiber/beam stiffness_scale (EA, GA factor; speed option, 1 = real stiffness)", "1",
+        default=1.0, gt=0.0, le=1.0,
+    )  # fmt: skip
+    beam_integrator: Literal["implicit", "explicit"] = choice(
+        "fix fiber/beam integrator: implicit (generalized-alpha per fiber, steps set by accuracy; "
+        "thesis sec. 2.2) or explicit (velocity Verlet below the critical step; comparison)",
+        default="implicit",
+    )
+    rho_inf: float = quantity(
+        "fix fiber/beam rho_inf: numerical dissipation of the implicit integrator (spectral "
+        "radius at infinite frequency; 1 = none)", "1", default=0.5, ge=0.0, le=1.0,
+    )  # fmt: skip
+    newton_tolerance: float = quantity(
+        "fix fiber/beam newton_tol: implicit convergence tolerance (translations relative to the "
+        "section radius, rotations in rad)", "1", default=1.0e-8, gt=0.0, le=1e-2,
+    )  # fmt: skip
+    newton_max_iterations: int = quantity(
+        "fix fiber/beam newton_max: Newton iterations per implicit step before it is split",
+        "1", default=25, ge=1, le=1000,
     )  # fmt: skip
     damping_time_s: float = quantity(
         "fix fiber/beam Kelvin-Voigt damping time", "s", default=0.0, ge=0.0, le=1.0

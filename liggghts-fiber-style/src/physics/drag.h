@@ -48,6 +48,35 @@ inline Vec3 drag_per_length(double rho, double mu, double diameter, const Vec3 &
   return {k * v_rel[0], k * v_rel[1], k * v_rel[2]};
 }
 
+/// d ln C_D / d ln Re of eq. 2.15, C_D = 9.689 Re^-0.78 (1 + a Re^p) per branch:
+/// -0.78 + a p Re^p / (1 + a Re^p); 0 above the clamp (C_D constant there).
+inline double drag_coefficient_log_slope(double Re) {
+  if (!(Re > 0.0)) return -0.78;
+  if (Re > kReMax) return 0.0;
+  double a, p;
+  if (Re < 5.0) a = 0.147, p = 0.82;
+  else if (Re < 40.0) a = 0.227, p = 0.5;
+  else a = 0.0838, p = 0.82;
+  const double t = a * std::pow(Re, p);
+  return -0.78 + p * t / (1.0 + t);
+}
+
+/// Jacobian of eq. 2.14 with respect to the relative velocity, df/dv_rel (N s/m^2, per unit
+/// length), as the symmetric 3x3 matrix xx yy zz xy xz yz. With f = k(s) u, s = |u|,
+/// k = 0.5 rho C_D d s: df/du = k [I + (1 + dlnC_D/dlnRe) u u^T / s^2]. Positive definite
+/// (dlnC_D/dlnRe > -1 in every branch). Zero at u = 0, where k -> 0 like s^0.22.
+/// A fiber moving at v in a fluid at u_f feels f(u_f - v): -df/dv = df/du.
+inline std::array<double, 6> drag_jacobian(double rho, double mu, double diameter, const Vec3 &v_rel) {
+  const double s2 = v_rel[0] * v_rel[0] + v_rel[1] * v_rel[1] + v_rel[2] * v_rel[2];
+  if (!(s2 > 0.0) || diameter <= 0.0) return {0, 0, 0, 0, 0, 0};
+  const double s = std::sqrt(s2);
+  const double Re = reynolds(rho, s, diameter, mu);
+  const double k = 0.5 * rho * drag_coefficient(Re) * diameter * s;
+  const double c = k * (1.0 + drag_coefficient_log_slope(Re)) / s2;
+  return {k + c * v_rel[0] * v_rel[0], k + c * v_rel[1] * v_rel[1], k + c * v_rel[2] * v_rel[2],
+          c * v_rel[0] * v_rel[1], c * v_rel[0] * v_rel[2], c * v_rel[1] * v_rel[2]};
+}
+
 /// Magnitude of eq. 2.14 for a relative speed (N/m).
 inline double drag_per_length_magnitude(double rho, double mu, double diameter, double speed) {
   if (speed <= 0.0 || diameter <= 0.0) return 0.0;

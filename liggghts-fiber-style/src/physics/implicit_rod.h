@@ -25,11 +25,11 @@
        dQ += d / h,  v += gamma' d,  vdot += beta' d,  gamma' = gamma/(h beta),
        beta' = (1 - am)/(h^2 beta (1 - af)).
    Iteration matrix S = beta' M + gamma' C_t + K_t (modified Newton: formed and factored at the
-   first iteration of a step and again after every kRefresh iterations without convergence), with K_t the tangent of the internal forces
+   first iteration of a step and again after every kRefresh iterations without convergence, or as
+   soon as a correction is not below kContraction times the previous one), with K_t the tangent of the internal forces
    by central differences of the exact discrete element forces (24 evaluations per element), C_t
-   the gyroscopic, drag and damping tangents, and the tangent operator of exp taken as identity
-   (rotation increments per step are small; Newton then converges linearly at a tiny rate instead
-   of quadratically). S is block tridiagonal in the nodes (6 x 6 blocks); it is solved after a
+   the gyroscopic, drag and damping tangents, and the internal-force tangent multiplied by the
+   right Jacobian of SO(3) at the current rotation increment (the tangent operator T(h dQ)). S is block tridiagonal in the nodes (6 x 6 blocks); it is solved after a
    symmetric diagonal scaling by physics/block_tridiag.h.
    A step whose iteration does not converge (tolerance on the corrections: translations relative
    to the section radius, rotations in radians) or produces non-finite numbers is restarted from
@@ -123,6 +123,7 @@ class Stepper {
   static constexpr double kMaxTurn = 0.5;      // rad: largest rotation correction of one iteration
   static constexpr double kMaxStepTurn = 1.0;  // rad: largest rotation of a node in one step
   static constexpr int kRefresh = 4;           // iterations on one tangent before it is formed again
+  static constexpr double kContraction = 0.25; // a correction larger than this x the previous one: new tangent
   // Start of the integration. consistent = true: initial accelerations from all forces,
   // vdot = (F_int + F)/m, J Wdot = R^T (T_int + T) - W x J W, a = vdot (exact start; use it when
   // the step resolves every mode of the fiber). consistent = false: from the EXTERNAL loads only.
@@ -230,6 +231,28 @@ class Stepper {
     }
   }
 
+  // K[:, c0..c0+2] <- K[:, c0..c0+2] J_r(th), J_r(th) = J_l(-th) = I - a th^ + b th^2 (12 x 12 K)
+  static void right_jacobian_columns(double K[144], int c0, Vec3 th) {
+    const double f = beam::norm(th);
+    if (f < 1e-12) return;
+    const beam::JacobianCoeffs k = beam::jacobian_coeffs(f);
+    double Jr[9];
+    for (int j = 0; j < 3; ++j) {
+      Vec3 e{};
+      e[j] = 1.0;
+      const Vec3 col = beam::apply_so3(th, -k.a, k.b, e);  // J_r e_j
+      for (int i = 0; i < 3; ++i) Jr[i * 3 + j] = col[i];
+    }
+    for (int r = 0; r < 12; ++r) {
+      double row[3];
+      for (int j = 0; j < 3; ++j) {
+        row[j] = 0.0;
+        for (int m = 0; m < 3; ++m) row[j] += K[r * 12 + c0 + m] * Jr[m * 3 + j];
+      }
+      for (int j = 0; j < 3; ++j) K[r * 12 + c0 + j] = row[j];
+    }
+  }
+
   void set_positions(std::vector<Node> &nodes, const std::vector<Node> &start, double h) {
     for (std::size_t k = 0; k < nodes.size(); ++k) {
       if (nodes[k].fixed) continue;
@@ -287,11 +310,13 @@ class Stepper {
     scale_.assign(n * 6, 1.0);
     double Ke[144], re[12];
     int since_tangent = 0;
+    bool slow = false;         // the last correction did not shrink fast enough: form a new tangent
+    double prev_err = INFINITY;
     for (int it = 0; it < opt.max_iter; ++it) {
       ++st.iterations;
       // modified Newton: the tangent is formed and factored at the first iteration and again
       // whenever kRefresh iterations have not converged
-      const bool tangent = it == 0 || since_tangent >= kRefresh;
+      const bool tangent = it == 0 || since_tangent >= kRefresh || slow;
       since_tangent = tangent ? 1 : since_tangent + 1;
       if (tangent) {
         ++st.tangents;
@@ -310,6 +335,10 @@ class Stepper {
         }
         if (!tangent) continue;
         element_tangent(A, B, elems[e], opt.t_damp, Ke);
+        // the rotation corrections act through q = q_n exp(h dQ): chain rule with the right
+        // Jacobian of SO(3) at the current increment (the tangent operator T(h dQ) of Bruels et al.)
+        right_jacobian_columns(Ke, 3, h * dQw_[e]);
+        right_jacobian_columns(Ke, 9, h * dQw_[e + 1]);
         const double kfac = 1.0 + gp * opt.t_damp;  // Kelvin-Voigt: damping tangent ~ t_d K
         for (int r = 0; r < 6; ++r)
           for (int c = 0; c < 6; ++c) {
@@ -413,6 +442,8 @@ class Stepper {
         nd.vdw = nd.vdw + bp * dth;
       }
       set_positions(nodes, start, h);
+      slow = !(err <= kContraction * prev_err);
+      prev_err = err;
       if (damp < 1.0 || !(err <= opt.tol)) continue;
       for (std::size_t k = 0; k < n; ++k)
         if (h * beam::norm(dQw_[k]) > kMaxStepTurn) return false;

@@ -89,7 +89,9 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     # pair_style fiber/dlvo needs newton on; the fixes are single-rank and indifferent to it
     fiber_preamble(s, f, scene.contact is not None,
                    "inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
-                   "damping", ld.damping_time_s)
+                   "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
+                   "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
+                   "newton_max", ld.newton_max_iterations)
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
@@ -547,9 +549,18 @@ def approximations(scene: Scene) -> list[str]:
     assert ld is not None
     out = [
         "one-way coupling: the flow through the bare fabric is frozen (fibers do not change it)",
+        (f"fix fiber/beam integrator implicit (generalized-alpha, rho_inf {ld.rho_inf:g}, Newton "
+         f"tolerance {ld.newton_tolerance:g}): external loads held over each step (first order), "
+         "drag linearly implicit" if ld.beam_integrator == "implicit" else
+         "fix fiber/beam integrator explicit (velocity Verlet); drag evaluated with the half-step "
+         "velocity"),
         f"fix fiber/beam speed options: inertia_scale {ld.inertia_scale:g}, stiffness_scale "
-        f"{ld.stiffness_scale:g} (EA and GA scaled: fibers are extensible/shear-soft)",
-        "drag evaluated with the half-step velocity of velocity Verlet, per element at its centre",
+        f"{ld.stiffness_scale:g}" + (" (EA and GA scaled: fibers are extensible/shear-soft)"
+                                     if ld.stiffness_scale != 1.0 else "") +
+        (" (rotary inertia scaled)" if ld.inertia_scale != 1.0 else "") +
+        (" (none: real stiffness and inertia)" if ld.inertia_scale == 1.0 and
+         ld.stiffness_scale == 1.0 else ""),
+        "drag per element at its centre",
         "yarn contact per fiber element (closest points of the element's and the yarn segment's "
         "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
         "node; radius max(a1, a2); sub-stepped 1-D normal motion of the contact point with the "
