@@ -62,3 +62,28 @@ def test_each_field_changes_the_fix_line(field: str, key: str, new: str) -> None
     assert before != after
     got = value(after, key)
     assert got == new or float(got) == float(new)
+
+
+def line_of(extra: str, style: str) -> str:
+    scene = parse_scene(yaml.safe_load(BASE % extra), "fields.yaml")
+    text = laydown.build_input(scene, 50, 2)
+    lines = [ln for ln in text.splitlines() if style in ln]
+    assert lines
+    return lines[0]
+
+
+def test_contact_integrator_reaches_the_yarn_and_wall_fixes() -> None:
+    assert "integrator cvode" in line_of("", "fiber/yarns")
+    sub = line_of(", contact_integrator: substep, contact_substeps: 40", "fiber/yarns")
+    assert "integrator substep" in sub and value(sub, "substeps") == "40"
+    wall = line_of(", walls: wall_fiber_dlvo, contact_integrator: substep, contact_substeps: 40",
+                   "wall/fiber/dlvo")
+    assert value(wall, "substep") == "40"
+    assert "integrator cvode" in line_of(", walls: wall_fiber_dlvo", "wall/fiber/dlvo")
+
+
+def test_substeps_without_the_substep_integrator_is_an_error() -> None:
+    from fiberform.errors import SceneError
+
+    with pytest.raises(SceneError, match="contact_substeps"):
+        parse_scene(yaml.safe_load(BASE % ", contact_substeps: 40"), "fields.yaml")

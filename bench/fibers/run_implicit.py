@@ -41,7 +41,7 @@ from beam_cases import (  # noqa: E402
 OUT = Path(__file__).resolve().parent / "results"
 LF, NF, WF = 0.5e-3, 17, 10e-6          # frequency cantilever: length, nodes, radius (circular)
 LS, NS, WS = 1e-3, 17, 20e-6            # static cantilever: collapsed a1 = 0.8 w, a2 = 0.2 w
-PERIODS = 4.2                            # simulated periods of the frequency runs
+PERIODS = 100.0                          # simulated periods of the frequency runs
 DIVISIONS = [5, 10, 20, 40, 80, 160]     # implicit steps per period
 
 
@@ -49,12 +49,32 @@ def omega1(EI: float, rhoA: float, L: float) -> float:
     return 1.8751040687**2 / L**2 * math.sqrt(EI / rhoA)
 
 
+_STARTUP: list[float] = []
+
+
+def startup(build: Path, work: Path) -> float:
+    """Wall time of a run with no steps (process start, input, set-up): subtracted from every
+    measurement so that the cost per step is what is compared."""
+    if not _STARTUP:
+        case = Case([straight_chain(NF, LF, [WF, WF, 0, 0])], [-1e-4] * 3, [1e-4, 1e-4, 1e-3], dt=1e-9,
+                    steps=0, integrator="implicit")
+        ts = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            run_case(build, work, case)
+            ts.append(time.perf_counter() - t0)
+        _STARTUP.append(statistics.median(ts))
+    return _STARTUP[0]
+
+
 def timed(build: Path, work: Path, case: Case, repeat: int, **kw):
+    """Median and spread of the wall time minus the start-up time, over `repeat` runs."""
+    base = startup(build, work.parent / "startup")
     times, r = [], None
     for _ in range(repeat):
         t0 = time.perf_counter()
         r = run_case(build, work, case, **kw)
-        times.append(time.perf_counter() - t0)
+        times.append(max(time.perf_counter() - t0 - base, 1e-6))
     return r, statistics.median(times), max(times) - min(times)
 
 
@@ -168,6 +188,8 @@ def main() -> int:
         plt.close(fig)
     except ImportError:
         pass
+    res["startup_s"] = _STARTUP[0] if _STARTUP else None
+    (OUT / "implicit.json").write_text(json.dumps(res, indent=2) + "\n")
     print(json.dumps(res["equal_accuracy"], indent=2))
     for r in res["frequency"]:
         print(f"{r['integrator']:8s} dt {r['dt_s']:.3g} s ({r['steps_per_period']:.0f}/period): "

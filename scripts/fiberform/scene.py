@@ -686,9 +686,14 @@ class LaydownSection(_Section):
         "velocity-level stick/slip; 0: frictionless as the fiber/dlvo law)", "1", default=0.0,
         ge=0.0, le=10.0,
     )  # fmt: skip
+    contact_integrator: Literal["cvode", "substep"] = choice(
+        "Sub-integration of each fiber-yarn and fiber-wall contact: cvode (as pair_style "
+        "fiber/dlvo, the thesis' method) or substep (contact_substeps velocity-Verlet sub-steps)",
+        default="cvode",
+    )
     contact_substeps: int = quantity(
-        "Velocity-Verlet sub-steps per step of each node-yarn contact", "1", default=100, ge=1,
-        le=100000,
+        "Velocity-Verlet sub-steps per step of each yarn/wall contact with contact_integrator "
+        "substep (rejected with cvode)", "1", default=100, ge=1, le=100000,
     )  # fmt: skip
     inertia_scale: float = quantity(
         "fix fiber/beam inertia_scale (rotary inertia factor; speed option, 1 = real inertia)", "1",
@@ -729,6 +734,9 @@ class LaydownSection(_Section):
                                 self.check_interval_s)
         if not self.terms:
             raise scene_problem("terms", "needs at least one of vdw, es, steric", [])
+        if self.contact_integrator == "cvode" and "contact_substeps" in self.model_fields_set:
+            raise scene_problem("contact_substeps", "only used with contact_integrator substep",
+                                self.contact_substeps)
         return self
 
 

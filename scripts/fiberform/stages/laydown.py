@@ -114,12 +114,12 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     else:  # the contact styles' own wall fix, one per plane
         for k, p in enumerate(planes):
             s.command("fix", f"wall{k}", "all", "wall/fiber/dlvo", "plane", *p, "terms", terms,
-                      "integrator", "substep", ld.contact_substeps)
+                      *contact_integrator_words(ld, wall=True))
     s.command("fix", "yarns", "all", "fiber/yarns", "yarns", file_token(YARNS_NAME), *plane_args,
               "remove_below", removal_height(scene), "remove_every", steps_per_check,
               "settle",
               settle_speed if settle_speed is not None else ld.settle_speed_m_s, steps_per_check, "settle_measure", ld.settle_measure,
-              "substeps", ld.contact_substeps,
+              *contact_integrator_words(ld, wall=False),
               "terms", terms, "friction", ld.friction_coefficient)
     c = scene.contact
     if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
@@ -142,6 +142,16 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
             s.command("run", steps_per_check, "pre", "no", "post", "no")
         s.command("if", *quit_if_at_least("settled", ld.settle_checks))
     return s.render()
+
+
+def contact_integrator_words(ld: Any, wall: bool) -> list[object]:
+    """The yarn/wall contact integrator keywords: fix wall/fiber/dlvo takes `integrator cvode` or
+    `integrator substep N`; fix fiber/yarns `integrator cvode|substep` and `substeps N`."""
+    if ld.contact_integrator == "cvode":
+        return ["integrator", "cvode"]
+    if wall:
+        return ["integrator", "substep", ld.contact_substeps]
+    return ["integrator", "substep", "substeps", ld.contact_substeps]
 
 
 def pair_options(scene: Scene) -> list[object]:
@@ -563,8 +573,10 @@ def approximations(scene: Scene) -> list[str]:
         "drag per element at its centre",
         "yarn contact per fiber element (closest points of the element's and the yarn segment's "
         "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
-        "node; radius max(a1, a2); sub-stepped 1-D normal motion of the contact point with the "
-        f"nodes' other forces held constant ({ld.contact_substeps} sub-steps), terms "
+        "node; radius max(a1, a2); the contact point's motion sub-integrated over the step with "
+        "the nodes' other forces held constant ("
+        + ("CVODE" if ld.contact_integrator == "cvode" else f"{ld.contact_substeps} sub-steps")
+        + "), terms "
         f"{','.join(ld.terms)}; Coulomb friction {ld.friction_coefficient:g} on yarns and "
         "planes (velocity-level stick/slip in fix fiber/yarns; not part of the thesis' law)",
         "fibers are removed whole when any node passes the removal height",
