@@ -316,7 +316,7 @@ void FixFiberBeam::read_nodes_file(const char *path) {
   MPI_Bcast(&status, 1, MPI_INT, 0, world);
   if (status) {
     const std::string m = "fix fiber/beam: " + why;
-    error->one(FLERR, fiberform::error_text(m));
+    fiberform::fail_one(lmp, FLERR, fiberform::error_text(m));
   }
   long n = static_cast<long>(rec.size());
   MPI_Bcast(&n, 1, MPI_LONG, 0, world);
@@ -447,7 +447,7 @@ void FixFiberBeam::compute_reference() {
       double d0[3] = {node_[b][X0] - node_[a][X0], node_[b][Y0] - node_[a][Y0], node_[b][Z0] - node_[a][Z0]};
       domain->minimum_image(d0);
       const double len0 = std::sqrt(d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]);
-      if (!(len0 > 0)) error->one(FLERR, "fix fiber/beam: two consecutive nodes share the same reference position");
+      if (!(len0 > 0)) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: two consecutive nodes share the same reference position");
       double area, I[3], C[6];
       element_section(a, b, &area, I, C);
       mass += 0.5 * rho_ * area * len0;
@@ -634,7 +634,7 @@ void FixFiberBeam::internal_forces_local() {
     if (node_[i][IDX] + 1 < node_[i][CNT]) {
       const int j = neighbour_node(lmp, i, +1);
       if (j < 0) missing_neighbour(lmp, i, +1);
-      if (node_[i][HASREF] < 0.5) error->one(FLERR, "fix fiber/beam: element without reference");
+      if (node_[i][HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: element without reference");
       const bm::ElementForces e = element(i, j);
       add(&acc_[i][6], e.fA);
       add(&acc_[i][9], e.tA);
@@ -653,7 +653,7 @@ void FixFiberBeam::internal_forces_local() {
       const int j = neighbour_node(lmp, i, -1);
       if (j < 0) missing_neighbour(lmp, i, -1);
       if (j >= nlocal) {
-        if (node_[j][HASREF] < 0.5) error->one(FLERR, "fix fiber/beam: ghost element without reference");
+        if (node_[j][HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: ghost element without reference");
         const bm::ElementForces e = element(j, i);
         add(&acc_[i][0], e.fB);
         add(&acc_[i][3], e.tB);
@@ -880,7 +880,7 @@ void FixFiberBeam::implicit_step() {
     auto &vecf = fibers[static_cast<int>(b[S_FID])];
     if (vecf.empty()) vecf.assign(static_cast<size_t>(b[S_CNT]), nullptr);
     const int idx = static_cast<int>(b[S_IDX]);
-    if (idx < 0 || idx >= static_cast<int>(vecf.size())) error->one(FLERR, "fix fiber/beam: bad node index");
+    if (idx < 0 || idx >= static_cast<int>(vecf.size())) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: bad node index");
     vecf[idx] = b;
   }
   const rod::GenAlpha ga = rod::gen_alpha(rho_inf_);
@@ -890,7 +890,8 @@ void FixFiberBeam::implicit_step() {
   opt.max_split = max_split_;
   opt.t_damp = t_damp_;
   opt.tau_drag = tau_drag_;
-  static rod::Stepper stepper;
+  if (!stepper_) stepper_ = std::make_unique<rod::Stepper>();
+  rod::Stepper &stepper = *stepper_;
   std::vector<rod::Node> nodes;
   std::vector<rod::Element> elems;
   std::vector<bm::Vec3> starts;
@@ -937,7 +938,7 @@ void FixFiberBeam::implicit_step() {
       nd.scale = b[S_SCALE];
       if (b[S_ACCOK] < 0.5) need_init = true;
       if (k + 1 < n) {
-        if (b[S_HASREF] < 0.5) error->one(FLERR, "fix fiber/beam: element without reference");
+        if (b[S_HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: element without reference");
         rod::Element &el = elems[k];
         el.ref.L0 = b[S_L0];
         el.ref.gamma0 = {b[S_G0], b[S_G0 + 1], b[S_G0 + 2]};
@@ -1012,7 +1013,7 @@ void FixFiberBeam::implicit_step() {
   for (size_t o = 0; o + R_N <= brecv.size(); o += R_N) {
     const double *r = &brecv[o];
     const int i = atom->map(static_cast<int>(r[R_TAG]));
-    if (i < 0 || i >= nlocal) error->one(FLERR, "fix fiber/beam: returned node is not owned here");
+    if (i < 0 || i >= nlocal) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: returned node is not owned here");
     double *p = node_[i];
     for (int c = 0; c < 3; ++c) {
       x[i][c] += r[R_DX + c];

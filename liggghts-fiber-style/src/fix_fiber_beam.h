@@ -20,10 +20,15 @@
 #ifndef LMP_FIX_FIBER_BEAM_H
 #define LMP_FIX_FIBER_BEAM_H
 
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "fix.h"
+
+namespace fiberform::physics::rod {
+class Stepper;
+}
 
 namespace LAMMPS_NS {
 
@@ -145,6 +150,7 @@ class FixFiberBeam : public Fix {
   double rho_inf_ = 0.5, newton_tol_ = 1e-8;
   int newton_max_ = 25, max_split_ = 8;
   int clamp_groupbit_ = 0;
+  std::unique_ptr<fiberform::physics::rod::Stepper> stepper_;  // implicit solver workspace
   std::vector<int> owner_;            // owner rank of fiber ID (index), -1 if absent
   bool owners_valid_ = false;
   std::vector<double> sendbuf_, recvbuf_;

@@ -160,7 +160,8 @@ void FixFiberDrag::post_force(int) {
     for (int side = 0; side < 2; ++side) {
       if ((side == 0 && idx == 0) || (side == 1 && idx == cnt - 1)) continue;
       const int j = atom->map(atom->tag[i] + (side == 0 ? -1 : 1));
-      if (j < 0) error->one(FLERR, "fix fiber/drag: neighbour node not found (ghost cut-off too short?)");
+      if (j < 0)
+        fiberform::fail_one(lmp, FLERR, "fix fiber/drag: the neighbour node of an element is not on this rank or was lost (a node left the box: check the boundary and the lost-atoms warning), or the ghost cut-off is too short");
       double fe[3], je[6];
       const double ve = side == 0 ? element_force(j, i, fe, jacobian ? je : nullptr)
                                   : element_force(i, j, fe, jacobian ? je : nullptr);

@@ -622,7 +622,7 @@ void FixFiberYarns::post_force(int) {
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
       int j = atom->map(atom->tag[i] + 1);
       if (j < 0 || j >= nlocal)
-        error->one(FLERR, "fix fiber/yarns: the next node of an element is not owned by this rank "
+        fiberform::fail_one(lmp, FLERR, "fix fiber/yarns: the next node of an element is not owned by this rank "
                           "(element contact runs on one rank only)");
       double rj[4];
       beam_->section_radii(j, rj);
