@@ -193,3 +193,13 @@ def test_foam_helpers_refuse_injections(value: str) -> None:
         foam_entry("key", value)
     with pytest.raises(InputFormatError):
         foam_value([1.0, value])
+
+
+def test_ident_list_accepts_identifiers_only() -> None:
+    from fiberform.errors import InputFormatError
+    from fiberform.inputs import ident_list
+
+    assert str(ident_list(["vdw", "es", "steric"])) == "vdw,es,steric"
+    for bad in (["vdw", "es steric"], ["vdw\nshell ls"], [], "vdw", ["1abc"]):
+        with pytest.raises(InputFormatError):
+            ident_list(bad)  # type: ignore[arg-type]

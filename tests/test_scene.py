@@ -57,7 +57,6 @@ contact:
   hamaker_J: 8.0e-21
   ionic_strength_mol_m3: 1.0
   surface_potential_V: -0.03
-  steric_length_m: 1.0e-8
 """
 )
 

@@ -32,6 +32,7 @@ __all__ = [
     "dump_format",
     "file_token",
     "fix_ref",
+    "ident_list",
     "quit_if_at_least",
     "fmt_float",
     "fmt_ident",
@@ -110,6 +111,9 @@ class Token:
     def __repr__(self) -> str:
         return f"Token({self.text!r})"
 
+    def __str__(self) -> str:
+        return self.text
+
 
 _TOKEN_KEY = object()
 #: The ``*`` wildcard of ``pair_coeff * *``.
@@ -140,6 +144,14 @@ def file_token(name: str) -> Token:
     if not isinstance(name, str) or _FILE_NAME.fullmatch(name) is None:
         raise InputFormatError(f"refusing file name {name!r}")
     return Token(name, _TOKEN_KEY)
+
+
+def ident_list(names: Sequence[str]) -> Token:
+    """A comma-separated list of identifiers as one word (e.g. the `terms vdw,es,steric` of the
+    contact styles); every name must be an identifier."""
+    if isinstance(names, str) or not names:
+        raise InputFormatError(f"refusing identifier list {names!r}")
+    return Token(",".join(fmt_ident(n) for n in names), _TOKEN_KEY)
 
 
 def fix_ref(fix_id: str, index: int | None = None) -> Token:

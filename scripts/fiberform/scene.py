@@ -381,9 +381,9 @@ ContactTerm = Literal["vdw", "es", "steric"]
 class ContactSection(_Section):
     """Contact model between fibers."""
 
-    model: Literal["fiber_dlvo", "stock_hertz"] = choice(
-        "Contact model: fiber_dlvo (the project's colloidal and elastic fiber contact) or "
-        "stock_hertz (LIGGGHTS' Hertz model)"
+    model: Literal["fiber_dlvo"] = choice(
+        "Contact model: fiber_dlvo (pair_style fiber/dlvo: the thesis' extended DLVO plus steric "
+        "repulsion, sub-integrated per contact)"
     )
     integrator: Literal["cvode", "substep", "none"] = choice(
         "Per-contact time integration (none: forces from the plain DEM step)", default="none"
@@ -408,25 +408,12 @@ class ContactSection(_Section):
     surface_potential_V: float | None = quantity(
         "Surface potential of the fibers (required with es)", "V", default=None, ge=-1.0, le=1.0
     )
-    steric_length_m: float | None = quantity(
-        "Thickness of the steric (fibril brush) layer (required with steric)",
-        "m",
-        default=None,
-        gt=0.0,
-        le=1.0e-5,
-    )
     cutoff_m: float | None = quantity(
         "Range of the colloidal forces beyond contact (absent: chosen by the model)",
         "m",
         default=None,
         gt=0.0,
         le=1.0e-3,
-    )
-    restitution: float | None = quantity(
-        "Coefficient of restitution (required by stock_hertz)", "1", default=None, gt=0.0, le=1.0
-    )
-    friction_coefficient: float | None = quantity(
-        "Coulomb friction coefficient", "1", default=None, ge=0.0, le=10.0
     )
     substeps: int = quantity(
         "Velocity-Verlet sub-steps per step of each contact (integrator substep only)", "1",
@@ -441,15 +428,6 @@ class ContactSection(_Section):
     def _check(self) -> ContactSection:
         if len(set(self.terms)) != len(self.terms):
             raise scene_problem("terms", "terms must not repeat", self.terms)
-        if self.model == "stock_hertz":
-            if self.terms:
-                raise scene_problem("terms", "stock_hertz has no colloidal terms", self.terms)
-            if self.integrator != "none":
-                raise scene_problem(
-                    "integrator", "stock_hertz supports only integrator: none", self.integrator
-                )
-            if self.restitution is None:
-                raise scene_problem("restitution", "required by model stock_hertz")
         if self.model == "fiber_dlvo" and not self.terms:
             raise scene_problem("terms", "fiber_dlvo needs at least one of vdw, es, steric", [])
         if "vdw" in self.terms and self.hamaker_J is None:
@@ -459,8 +437,6 @@ class ContactSection(_Section):
                 raise scene_problem("ionic_strength_mol_m3", "required when terms contains es")
             if self.surface_potential_V is None:
                 raise scene_problem("surface_potential_V", "required when terms contains es")
-        if "steric" in self.terms and self.steric_length_m is None:
-            raise scene_problem("steric_length_m", "required when terms contains steric")
         return self
 
 

@@ -31,7 +31,9 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import FiberformError, StageError
-from ..inputs import STAR, LiggghtsInput, dump_format, file_token, fix_ref, quit_if_at_least
+from ..inputs import (
+    STAR, LiggghtsInput, dump_format, file_token, fix_ref, ident_list, quit_if_at_least,
+)
 from ..provenance import file_hash, write_dataset
 from ..runner import liggghts_progress, run
 from ..scene import FluidSection, Scene
@@ -76,6 +78,30 @@ WALL_GRAN_MATERIAL: tuple[tuple[str, str, tuple[object, ...]], ...] = (
 )
 
 
+def run_lengths(scene: Scene) -> tuple[int, int]:
+    """Steps per settle check and the number of checks of the lay-down."""
+    ld = scene.laydown
+    assert ld is not None
+    steps_per_check = max(1, round(ld.check_interval_s / ld.timestep_s))
+    return steps_per_check, max(1, math.ceil(ld.max_time_s / (steps_per_check * ld.timestep_s)))
+
+
+def settle_speed(scene: Scene, superficial_velocity_m_s: float) -> float:
+    """The settle threshold (m/s): settle_speed_fraction x the superficial velocity, or
+    settle_speed_m_s."""
+    ld = scene.laydown
+    assert ld is not None
+    return (ld.settle_speed_fraction * abs(superficial_velocity_m_s)
+            if ld.settle_speed_fraction is not None else ld.settle_speed_m_s)
+
+
+def render_input(scene: Scene, superficial_velocity_m_s: float) -> str:
+    """The lay-down's LIGGGHTS input for a flow of the given superficial velocity (m/s): every
+    field of the laydown and contact sections acts through here."""
+    steps_per_check, checks = run_lengths(scene)
+    return build_input(scene, steps_per_check, checks, settle_speed(scene, superficial_velocity_m_s))
+
+
 def build_input(scene: Scene, steps_per_check: int, checks: int,
                 settle_speed: float | None = None) -> str:
     """The LIGGGHTS input of the lay-down (files in the working folder: fibers.data,
@@ -99,7 +125,7 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
         (lo[0], 0.0, 0.0, 1.0, 0.0, 0.0), (hi[0], 0.0, 0.0, -1.0, 0.0, 0.0),
         (0.0, lo[1], 0.0, 0.0, 1.0, 0.0), (0.0, hi[1], 0.0, 0.0, -1.0, 0.0),
     ]
-    terms = ",".join(ld.terms)
+    terms = ident_list(ld.terms)
     plane_args: list[object] = []
     if ld.walls == "fiber_yarns":
         for p in planes:
@@ -161,7 +187,7 @@ def pair_options(scene: Scene) -> list[object]:
     out: list[object] = ["integrator", c.integrator]
     if c.integrator == "substep":
         out.append(c.substeps)
-    out += ["terms", ",".join(c.terms)]
+    out += ["terms", ident_list(c.terms)]
     if c.hamaker_J is not None:
         out += ["hamaker", c.hamaker_J]
     if c.ionic_strength_mol_m3 is not None:
@@ -400,13 +426,11 @@ class Laydown(Stage):
             f_off = np.asarray(fh["fibers/offsets"][...], dtype=np.int64)
             f_mass = np.asarray(fh["fibers/mass"][...], dtype=float)
             x0 = np.asarray(fh["fibers/x"][...], dtype=float)
-        steps_per_check = max(1, round(ld.check_interval_s / ld.timestep_s))
-        checks = max(1, math.ceil(ld.max_time_s / (steps_per_check * ld.timestep_s)))
+        steps_per_check, checks = run_lengths(scene)
         with h5py.File(ctx.scene.output_path / FlowStage.folder / FlowStage.products[0], "r") as fh:
             u_s = float(fh["flow_rate/superficial_velocity"][()])
-        v_settle = (ld.settle_speed_fraction * abs(u_s) if ld.settle_speed_fraction is not None
-                    else ld.settle_speed_m_s)
-        (work / INPUT_NAME).write_text(build_input(scene, steps_per_check, checks, v_settle))
+        v_settle = settle_speed(scene, u_s)
+        (work / INPUT_NAME).write_text(render_input(scene, u_s))
         t0 = time.monotonic()
         try:
             run([str((ctx.build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log",
@@ -587,7 +611,8 @@ def approximations(scene: Scene) -> list[str]:
     else:
         out.append("fiber-fiber contact: pair_style fiber/dlvo " +
                    " ".join(str(v) for v in pair_options(scene)) +
-                   " (points 'auto' unless given; steric_length_m not passed: law defaults)")
+                   " (points 'auto' unless given; steric parameters: the style's defaults, "
+                   "docs/models/contact.md)")
     if ld.walls == "wall_fiber_dlvo":
         out.append("side walls: fix wall/fiber/dlvo (contact developers' fix)")
     elif ld.walls == "wall_gran":

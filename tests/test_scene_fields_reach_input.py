@@ -1,0 +1,71 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Every field of the laydown and contact sections reaches the generated LIGGGHTS input of the
+lay-down (issue 10: a field that configures nothing must not exist). The fields are enumerated from
+the pydantic models, so a new field without an effect (or without an entry in ALTERNATIVES) fails
+this test. No binaries needed: the input is rendered by the stage's own function."""
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from fiberform.scene import ContactSection, LaydownSection, parse_scene
+from fiberform.stages import laydown
+
+BASE = {
+    "name": "fields",
+    "run": {"timestep_s": 1.0e-7, "duration_s": 1.0e-3},
+    "domain": {"lo_m": [0.0, 0.0, 0.0], "hi_m": [1.0e-3, 1.0e-3, 3.437e-3]},
+    "fibers": {"count": 2, "length_m": 0.4e-3, "width_m": 20.0e-6, "segments": 8,
+               "youngs_modulus_Pa": 10.0e9, "shear_modulus_Pa": 4.0e9},
+    "fabric": {"size_x_m": 1.0e-3, "size_y_m": 1.0e-3},
+    "flow": {"delta_p_Pa": 100.0, "cell_size_m": 50.0e-6, "height_above_fabric_m": 0.8e-3},
+    "laydown": {"max_time_s": 2.0e-3, "check_interval_s": 5.0e-4, "contact_integrator": "substep",
+                "walls": "wall_fiber_dlvo"},
+    "contact": {"model": "fiber_dlvo", "integrator": "substep", "terms": ["vdw", "es", "steric"],
+                "hamaker_J": 8.0e-21, "ionic_strength_mol_m3": 1.0, "surface_potential_V": -0.025},
+}
+U_S = 0.1  # m/s, superficial velocity of the flow stage
+
+# another valid value of every field (merged into BASE's section)
+ALTERNATIVES: dict[str, dict[str, object]] = {
+    "laydown": {
+        "timestep_s": 2.0e-7, "max_time_s": 3.0e-3, "check_interval_s": 2.5e-4,
+        "settle_speed_m_s": 3.0e-3, "settle_speed_fraction": 0.05, "settle_measure": "fiber",
+        "settle_checks": 7, "removal_height_m": 1.5e-3, "walls": "wall_gran",
+        "terms": ["steric", "vdw"], "friction_coefficient": 0.3, "contact_integrator": "cvode",
+        "contact_substeps": 37, "inertia_scale": 10.0, "stiffness_scale": 0.5,
+        "beam_integrator": "explicit", "rho_inf": 0.8, "newton_tolerance": 1.0e-9,
+        "newton_max_iterations": 40, "damping_time_s": 1.0e-6,
+    },
+    "contact": {
+        "integrator": "cvode", "terms": ["vdw", "steric"], "hamaker_J": 1.0e-20,
+        "ionic_strength_mol_m3": 2.0, "surface_potential_V": -0.03, "cutoff_m": 3.0e-8,
+        "substeps": 33, "points_per_element": 3,
+    },
+}
+# fields whose only value cannot be changed (a single allowed choice)
+SINGLE_CHOICE = {("contact", "model")}
+
+
+def render(section: str | None = None, field: str | None = None) -> str:
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    if section is not None and field is not None:
+        data[section][field] = ALTERNATIVES[section][field]
+    return laydown.render_input(parse_scene(data, "fields.yaml"), U_S)
+
+
+def cases() -> list[tuple[str, str]]:
+    out = []
+    for section, model in (("laydown", LaydownSection), ("contact", ContactSection)):
+        out += [(section, f) for f in model.model_fields if (section, f) not in SINGLE_CHOICE]
+    return out
+
+
+def test_every_field_has_an_alternative() -> None:
+    missing = [f"{s}.{f}" for s, f in cases() if f not in ALTERNATIVES[s]]
+    assert not missing, f"add an alternative value for: {missing}"
+
+
+@pytest.mark.parametrize("section,field", cases())
+def test_field_changes_the_generated_input(section: str, field: str) -> None:
+    assert render() != render(section, field), f"{section}.{field} does not reach the input"
