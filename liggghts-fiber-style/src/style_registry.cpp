@@ -45,13 +45,15 @@ const StyleEntry kStyles[] = {
      "internal: sub-integration step of pair fiber/dlvo (created automatically)",
      nullptr, &make_fix<LAMMPS_NS::FixFiberDlvoStep>, nullptr},
     {StyleKind::Fix, "fiber/beam",
-     "flexible fibers: geometrically exact beam chains (thesis eq. 2.13), integrates its nodes",
+     "flexible fibers: geometrically exact beam chains (thesis eq. 2.13); integrates each fiber implicitly "
+     "(generalized-alpha, Newton) or explicitly",
      nullptr, &make_fix<LAMMPS_NS::FixFiberBeam>, nullptr},
     {StyleKind::Fix, "fiber/drag",
      "fluid drag (thesis eq. 2.14-2.16), gravity and buoyancy on fiber/beam elements; uniform or grid flow",
      nullptr, &make_fix<LAMMPS_NS::FixFiberDrag>, nullptr},
     {StyleKind::Fix, "fiber/yarns",
-     "static yarn chains and planes (fiber/dlvo law, sub-stepped) for fiber/beam nodes; removes fibers",
+     "static yarn chains and planes (fiber/dlvo law, sub-integrated: CVODE or sub-steps) for fiber/beam "
+     "nodes; removes fibers",
      nullptr, &make_fix<LAMMPS_NS::FixFiberYarns>, nullptr},
 };
 
