@@ -228,6 +228,12 @@ void FixFiberBeam::add_velocity_jacobian(int i, const double *D) {
   for (int k = 0; k < 6; ++k) node_[i][DJ0 + k] += D[k];
 }
 
+void FixFiberBeam::add_force_model(rod::NodeForceModel *m) {
+  if (std::find(models_.begin(), models_.end(), m) == models_.end()) models_.push_back(m);
+}
+void FixFiberBeam::remove_force_model(rod::NodeForceModel *m) {
+  models_.erase(std::remove(models_.begin(), models_.end(), m), models_.end());
+}
 void FixFiberBeam::remove_from_history(int i, const double *F) {
   if (!implicit_ || i < 0 || i >= atom->nlocal || !is_node(i)) return;
   const rod::GenAlpha g = rod::gen_alpha(rho_inf_);
@@ -936,6 +942,7 @@ void FixFiberBeam::implicit_step() {
       for (int c = 0; c < 6; ++c) nd.D[c] = b[S_D + c];
       nd.fixed = b[S_FIXED] > 0.5;
       nd.scale = b[S_SCALE];
+      nd.radius = b[S_SCALE];
       if (b[S_ACCOK] < 0.5) need_init = true;
       if (k + 1 < n) {
         if (b[S_HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: element without reference");
@@ -951,7 +958,7 @@ void FixFiberBeam::implicit_step() {
     for (size_t k = 0; k < n; ++k) starts[k] = nodes[k].x;
     // consistent initial accelerations only when the step resolves every mode (physics/implicit_rod.h)
     if (need_init) stepper.initialise(nodes, elems, opt, dt < dt_crit_[4]);
-    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt);
+    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt, &models_);
     if (!st.ok) {
       double amax = 0, vmax = 0;
       int kmax = 0;

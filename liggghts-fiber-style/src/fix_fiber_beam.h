@@ -28,6 +28,7 @@
 
 namespace fiberform::physics::rod {
 class Stepper;
+class NodeForceModel;
 }
 
 namespace LAMMPS_NS {
@@ -102,6 +103,11 @@ class FixFiberBeam : public Fix {
   // pseudo-acceleration), so that the generalized-alpha memory does not deliver F's impulse a
   // second time in the following steps. F in N, spatial.
   void remove_from_history(int i, const double F[3]);
+  // Implicit scheme only: a force model evaluated inside every fiber's Newton solve at the fiber's
+  // end-of-step state (contact with static bodies: fix fiber/yarns `implicit_force newton`). The
+  // registering fix owns the model and removes it before it is destroyed. Idempotent.
+  void add_force_model(fiberform::physics::rod::NodeForceModel *m);
+  void remove_force_model(fiberform::physics::rod::NodeForceModel *m);
   double youngs_modulus() const { return E_; }  // Pa
   double density() const { return rho_; }       // kg/m3
   // Implicit scheme: the internal (elastic) force and torque of local node i at the start of the
@@ -151,6 +157,7 @@ class FixFiberBeam : public Fix {
   int newton_max_ = 25, max_split_ = 8;
   int clamp_groupbit_ = 0;
   std::unique_ptr<fiberform::physics::rod::Stepper> stepper_;  // implicit solver workspace
+  std::vector<fiberform::physics::rod::NodeForceModel *> models_;  // not owned
   std::vector<int> owner_;            // owner rank of fiber ID (index), -1 if absent
   bool owners_valid_ = false;
   std::vector<double> sendbuf_, recvbuf_;

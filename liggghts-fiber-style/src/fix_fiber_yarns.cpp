@@ -29,47 +29,11 @@ using namespace LAMMPS_NS;
 using namespace FixConst;
 namespace phys = fiberform::physics;
 
-namespace {
 
-// closest point of segment a-b to p: returns the parameter in [0, 1]
-double closest_param(const std::array<double, 3> &a, const std::array<double, 3> &b, const double *p) {
-  double d[3], w[3];
-  for (int k = 0; k < 3; ++k) {
-    d[k] = b[k] - a[k];
-    w[k] = p[k] - a[k];
-  }
-  const double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-  if (dd <= 0.0) return 0.0;
-  const double t = (w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd;
-  return t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+FixFiberYarns::~FixFiberYarns() {
+  FixFiberBeam *beam = FixFiberBeam::find(lmp);
+  if (beam && model_) beam->remove_force_model(model_.get());
 }
-
-// closest points of segments p1-q1 (parameter s) and p2-q2 (parameter t), both clamped to [0, 1]
-void closest_params_seg_seg(const double *p1, const double *q1, const double *p2, const double *q2,
-                            double &s, double &t) {
-  double d1[3], d2[3], r[3];
-  for (int k = 0; k < 3; ++k) {
-    d1[k] = q1[k] - p1[k];
-    d2[k] = q2[k] - p2[k];
-    r[k] = p1[k] - p2[k];
-  }
-  const double a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2];
-  const double e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2];
-  const double f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2];
-  auto clamp01 = [](double v) { return v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v); };
-  if (a <= 0.0 && e <= 0.0) { s = t = 0.0; return; }
-  if (a <= 0.0) { s = 0.0; t = clamp01(f / e); return; }
-  const double c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2];
-  if (e <= 0.0) { t = 0.0; s = clamp01(-c / a); return; }
-  const double b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2];
-  const double denom = a * e - b * b;
-  s = denom > 1e-14 * a * e ? clamp01((b * f - c * e) / denom) : 0.0;
-  t = (b * s + f) / e;
-  if (t < 0.0) { t = 0.0; s = clamp01(-c / a); }
-  else if (t > 1.0) { t = 1.0; s = clamp01((b - c) / a); }
-}
-
-}  // namespace
 
 FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
   vector_flag = 1;
@@ -91,11 +55,8 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
       iarg += 2;
     } else if (kw == "plane") {
       need(6);
-      Plane pl{{val(1), val(2), val(3)}, {val(4), val(5), val(6)}};
-      const double nn = std::sqrt(pl.n[0] * pl.n[0] + pl.n[1] * pl.n[1] + pl.n[2] * pl.n[2]);
-      if (!(nn > 0.0)) error->all(FLERR, "fix fiber/yarns: plane normal must not be zero");
-      for (double &c : pl.n) c /= nn;
-      planes_.push_back(pl);
+      if (!bodies_.add_plane({val(1), val(2), val(3)}, {val(4), val(5), val(6)}))
+        error->all(FLERR, "fix fiber/yarns: plane normal must not be zero");
       iarg += 7;
     } else if (kw == "remove_below") {
       need(1);
@@ -116,9 +77,10 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
     } else if (kw == "implicit_force") {
       need(1);
       const std::string m = arg[iarg + 1];
+      newton_kw_ = m == "newton";
       if (m == "impulse") impulse_kw_ = true;
       else if (m == "position") impulse_kw_ = false;
-      else error->all(FLERR, "fix fiber/yarns: implicit_force must be impulse or position");
+      else if (m != "newton") error->all(FLERR, "fix fiber/yarns: implicit_force must be newton, impulse or position");
       iarg += 2;
     } else if (kw == "integrator") {
       need(1);
@@ -138,6 +100,13 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
       if (m == "node") settle_fiber_ = false;
       else if (m == "fiber") settle_fiber_ = true;
       else error->all(FLERR, "fix fiber/yarns: settle_measure must be node or fiber");
+      iarg += 2;
+    } else if (kw == "s1_damping") {
+      need(1);
+      const std::string m = arg[iarg + 1];
+      if (m == "yes") s1_damping_kw_ = 1;
+      else if (m == "no") s1_damping_kw_ = 0;
+      else error->all(FLERR, "fix fiber/yarns: s1_damping must be yes or no");
       iarg += 2;
     } else if (kw == "friction") {
       need(1);
@@ -178,7 +147,7 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
     force_reneighbor = 1;
     next_reneighbor = (update->ntimestep / remove_every_) * remove_every_ + remove_every_;
   }
-  build_bins();
+  bodies_.build_bins(0.0);
 }
 
 void FixFiberYarns::read_yarns(const char *path) {
@@ -201,61 +170,18 @@ void FixFiberYarns::read_yarns(const char *path) {
     if (!(ls >> p[0] >> p[1] >> p[2] >> r) || !(r > 0.0))
       error->all(FLERR, fiberform::error_text(std::string(path) + ":" + std::to_string(lineno) +
                                 ": expected 'yarn-index x y z radius' with radius > 0"));
-    if (yarn == prev_yarn) {
-      Segment sg{prev, p, 0.5 * (prev_r + r), yarn, {0, 0, 0}, 0.0};
-      double l2 = 0.0;
-      for (int k = 0; k < 3; ++k) {
-        sg.c[k] = 0.5 * (prev[k] + p[k]);
-        l2 += (p[k] - prev[k]) * (p[k] - prev[k]);
-      }
-      sg.half = 0.5 * std::sqrt(l2);
-      segs_.push_back(sg);
-    }
+    if (yarn == prev_yarn) bodies_.add_segment({prev[0], prev[1], prev[2]}, {p[0], p[1], p[2]}, 0.5 * (prev_r + r), yarn);
     prev_yarn = yarn;
     prev = p;
     prev_r = r;
   }
-  if (segs_.empty()) error->all(FLERR, fiberform::error_text(std::string("fix fiber/yarns: no yarn segments in ") + path));
-}
-
-// Bins of segment capsules (radius + reach), so that a node looks at the few segments near it.
-void FixFiberYarns::build_bins() {
-  bins_.clear();
-  if (segs_.empty()) return;
-  double rmax = 0.0, lmax = 0.0;
-  bin_lo_[0] = bin_lo_[1] = bin_lo_[2] = std::numeric_limits<double>::max();
-  for (const Segment &s : segs_) {
-    rmax = std::max(rmax, s.radius);
-    double l2 = 0.0;
-    for (int k = 0; k < 3; ++k) {
-      l2 += (s.b[k] - s.a[k]) * (s.b[k] - s.a[k]);
-      bin_lo_[k] = std::min(bin_lo_[k], std::min(s.a[k], s.b[k]));
-    }
-    lmax = std::max(lmax, std::sqrt(l2));
-  }
-  bin_size_ = std::max(rmax, lmax);
-  // reach beyond the yarn surface covered by the bins: a fiber radius of up to the yarn radius, or
-  // (set in init) the fiber radius plus one element length, so that the candidates looked up at an
-  // element's end nodes and midpoint cover its closest point
-  const double reach = std::max(rmax, bin_reach_);
-  for (int k = 0; k < 3; ++k) bin_lo_[k] -= 2.0 * bin_size_;
-  for (int id = 0; id < static_cast<int>(segs_.size()); ++id) {
-    const Segment &s = segs_[id];
-    int lo[3], hi[3];
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = static_cast<int>(std::floor((std::min(s.a[k], s.b[k]) - s.radius - reach - bin_lo_[k]) / bin_size_));
-      hi[k] = static_cast<int>(std::floor((std::max(s.a[k], s.b[k]) + s.radius + reach - bin_lo_[k]) / bin_size_));
-    }
-    for (int a = lo[0]; a <= hi[0]; ++a)
-      for (int b = lo[1]; b <= hi[1]; ++b)
-        for (int c = lo[2]; c <= hi[2]; ++c) bins_[bin_key(a, b, c)].push_back(id);
-  }
+  if (bodies_.segments().empty()) error->all(FLERR, fiberform::error_text(std::string("fix fiber/yarns: no yarn segments in ") + path));
 }
 
 int FixFiberYarns::setmask() { return POST_FORCE | PRE_EXCHANGE | END_OF_STEP; }
 
 void FixFiberYarns::end_of_step() {
-  if (implicit_ && !impulse_ && land_.size() >= 6 * static_cast<size_t>(atom->nlocal)) {
+  if (implicit_ && !impulse_ && !newton_ && land_.size() >= 6 * static_cast<size_t>(atom->nlocal)) {
     for (int i = 0; i < atom->nlocal; ++i) {
       for (int k = 0; k < 3; ++k) atom->v[i][k] += land_[6 * i + k];
       beam_->remove_from_history(i, &land_[6 * i + 3]);
@@ -302,6 +228,9 @@ void FixFiberYarns::init() {
   if (!beam_) error->all(FLERR, "fix fiber/yarns: needs a fix fiber/beam (fiber topology and sections)");
   implicit_ = beam_->implicit();
   impulse_ = !implicit_ || impulse_kw_;
+  newton_ = implicit_ && newton_kw_;
+  // the PD form of eq. 2.35 inside the implicit step (docs/styles/fix_fiber_yarns.md)
+  law_.steric.s1_damping = s1_damping_kw_ >= 0 ? s1_damping_kw_ == 1 : newton_;
   integ_.configure(use_cvode_ ? fiberform::ContactIntegrator::Method::Cvode : fiberform::ContactIntegrator::Method::Substep,
                    substeps_, 1e-6, 1e-13);
   beta_eff_ = implicit_ ? beam_->beta_eff() : 0.5;
@@ -325,13 +254,15 @@ void FixFiberYarns::init() {
     }
   }
   MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, world);
-  const double reach = glob[0] + law_.h_cut + glob[1];
-  if (reach > bin_reach_) {
-    bin_reach_ = reach;
-    build_bins();
+  bodies_.build_bins(glob[0] + law_.h_cut + glob[1]);
+  if (newton_) {
+    if (!model_) model_ = std::make_unique<phys::StaticContactModel>(bodies_, law_, mu_);
+    beam_->add_force_model(model_.get());
+  } else if (model_) {
+    beam_->remove_force_model(model_.get());
   }
   // the contact force uses the other forces on the node: they must be summed before this fix
-  bool after = false;
+  bool after = newton_;  // (not with newton: the contacts act inside the fiber's solve)
   for (int k = 0; k < modify->nfix; ++k) {
     if (modify->fix[k] == this) after = true;
     else if (after && (modify->fmask[k] & POST_FORCE) && comm->me == 0)
@@ -487,112 +418,71 @@ void FixFiberYarns::apply_friction(int i, int j, double s, const double n[3], do
   }
 }
 
-// candidate yarn segments of the bin holding point p (appended)
-void FixFiberYarns::collect_segments(const double *p, std::vector<int> &out) const {
-  const int bx = static_cast<int>(std::floor((p[0] - bin_lo_[0]) / bin_size_));
-  const int by = static_cast<int>(std::floor((p[1] - bin_lo_[1]) / bin_size_));
-  const int bz = static_cast<int>(std::floor((p[2] - bin_lo_[2]) / bin_size_));
-  auto it = bins_.find(bin_key(bx, by, bz));
-  if (it != bins_.end()) out.insert(out.end(), it->second.begin(), it->second.end());
-}
-
 /* Element i-j against the yarns: per yarn, the segment with the smallest separation between the
-   element's centre line and the yarn's centre line (closest points of two segments) acts. */
+   element's centre line and the yarn's centre line (physics/static_bodies.h) acts. */
 void FixFiberYarns::element_yarn_contacts(int i, int j, double r1, double &gap_min) {
   double **x = atom->x;
-  double mid[3];
-  for (int k = 0; k < 3; ++k) mid[k] = 0.5 * (x[i][k] + x[j][k]);
-  // the bins reach the fiber radius + h_cut + one element length beyond each yarn surface, so the
-  // midpoint's bin holds every segment that any point of the element can touch
-  cand_.clear();
-  collect_segments(mid, cand_);
-  if (cand_.empty()) return;
-  double he2 = 0.0;
-  for (int k = 0; k < 3; ++k) he2 += (x[j][k] - x[i][k]) * (x[j][k] - x[i][k]);
-  const double half_e = 0.5 * std::sqrt(he2);
-  const double dt = update->dt;
   double vmax2 = 0.0;
   for (int k = 0; k < 3; ++k) vmax2 = std::max(vmax2, std::max(atom->v[i][k] * atom->v[i][k], atom->v[j][k] * atom->v[j][k]));
-  const double margin = r1 + law_.h_cut + 1e-3 * r1 + 4.0 * std::sqrt(3.0 * vmax2) * dt;
-  int best_yarn[8];
-  double best_h[8], best_n[8][3], best_r[8], best_s[8];
-  int nbest = 0;
-  for (int id : cand_) {
-    const Segment &sg = segs_[id];
-    // bounding spheres of the two segments: cheap rejection
-    const double dc2 = (mid[0] - sg.c[0]) * (mid[0] - sg.c[0]) + (mid[1] - sg.c[1]) * (mid[1] - sg.c[1]) +
-                       (mid[2] - sg.c[2]) * (mid[2] - sg.c[2]);
-    const double reach = half_e + sg.half + sg.radius + margin;
-    if (dc2 > reach * reach) continue;
-    double se, ty;
-    closest_params_seg_seg(x[i], x[j], sg.a.data(), sg.b.data(), se, ty);
-    double d[3];
-    for (int k = 0; k < 3; ++k)
-      d[k] = (x[i][k] + se * (x[j][k] - x[i][k])) - (sg.a[k] + ty * (sg.b[k] - sg.a[k]));
-    const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    const double h = dist - sg.radius - r1;
-      if (h >= margin - r1 || dist <= 0.0) continue;
-    int slot = -1;
-    for (int b = 0; b < nbest; ++b)
-      if (best_yarn[b] == sg.yarn) slot = b;
-    if (slot < 0) {
-      if (nbest == 8) continue;
-      slot = nbest++;
-      best_yarn[slot] = sg.yarn;
-      best_h[slot] = std::numeric_limits<double>::max();
-    }
-    if (h < best_h[slot]) {
-      best_h[slot] = h;
-      best_r[slot] = sg.radius;
-      best_s[slot] = se;
-      for (int k = 0; k < 3; ++k) best_n[slot][k] = d[k] / dist;
-    }
-  }
-  for (int b = 0; b < nbest; ++b) {
+  const double margin = law_.h_cut + 1e-3 * r1 + 4.0 * std::sqrt(3.0 * vmax2) * update->dt;
+  phys::BodyHit hits[phys::StaticBodies::kMaxHits];
+  const int nh = bodies_.element_hits({x[i][0], x[i][1], x[i][2]}, {x[j][0], x[j][1], x[j][2]}, r1, margin, hits);
+  for (int b = 0; b < nh; ++b) {
     local_[0] += 1.0;
-    apply_element_contact(i, j, best_s[b], best_n[b], best_h[b], r1, best_r[b], gap_min);
+    const double n[3] = {hits[b].n.x, hits[b].n.y, hits[b].n.z};
+    apply_element_contact(i, j, hits[b].s, n, hits[b].h, r1, hits[b].r2, gap_min);
   }
 }
 
 void FixFiberYarns::node_yarn_contacts(int i, double r1, double &gap_min) {
   double **x = atom->x;
-  // yarns: the closest segment of each yarn near the node
-  const int bx = static_cast<int>(std::floor((x[i][0] - bin_lo_[0]) / bin_size_));
-  const int by = static_cast<int>(std::floor((x[i][1] - bin_lo_[1]) / bin_size_));
-  const int bz = static_cast<int>(std::floor((x[i][2] - bin_lo_[2]) / bin_size_));
-  auto it = bins_.find(bin_key(bx, by, bz));
-  if (it == bins_.end()) return;
-  // per yarn: best (smallest h) segment
-  int best_yarn[8];
-  double best_h[8], best_n[8][3], best_r[8];
-  int nbest = 0;
-  for (int id : it->second) {
-    const Segment &s = segs_[id];
-    const double t = closest_param(s.a, s.b, x[i]);
-    double d[3];
-    for (int k = 0; k < 3; ++k) d[k] = x[i][k] - (s.a[k] + t * (s.b[k] - s.a[k]));
-    const double dist = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    const double h = dist - s.radius - r1;
-    if (h >= law_.h_cut + 1e-3 * r1 + travel(i) || dist <= 0.0) continue;
-    int slot = -1;
-    for (int b = 0; b < nbest; ++b)
-      if (best_yarn[b] == s.yarn) slot = b;
-    if (slot < 0) {
-      if (nbest == 8) continue;
-      slot = nbest++;
-      best_yarn[slot] = s.yarn;
-      best_h[slot] = std::numeric_limits<double>::max();
-    }
-    if (h < best_h[slot]) {
-      best_h[slot] = h;
-      best_r[slot] = s.radius;
-      for (int k = 0; k < 3; ++k) best_n[slot][k] = d[k] / dist;
-    }
-  }
-  for (int b = 0; b < nbest; ++b) {
+  phys::BodyHit hits[phys::StaticBodies::kMaxHits];
+  const int nh = bodies_.node_hits({x[i][0], x[i][1], x[i][2]}, r1, law_.h_cut + 1e-3 * r1 + travel(i), hits);
+  for (int b = 0; b < nh; ++b) {
     local_[0] += 1.0;
-    apply_contact(i, best_n[b], best_h[b], r1, best_r[b], gap_min);
+    const double n[3] = {hits[b].n.x, hits[b].n.y, hits[b].n.z};
+    apply_contact(i, n, hits[b].h, r1, hits[b].r2, gap_min);
   }
+}
+
+/* implicit_force newton: the contacts act inside the fibers' Newton solves (registered with fix
+   fiber/beam); here only the diagnostics at the current state: contacts within h_cut (yarns,
+   planes) and the smallest gap. Elements whose second node is a ghost are seen too. */
+void FixFiberYarns::scan_contacts() {
+  const int nlocal = atom->nlocal;
+  double **x = atom->x;
+  double gap_min = std::numeric_limits<double>::max();
+  phys::BodyHit hits[phys::StaticBodies::kMaxHits];
+  for (int i = 0; i < nlocal; ++i) {
+    if (!(atom->mask[i] & groupbit) || !beam_->is_node(i)) continue;
+    double rr[4];
+    beam_->section_radii(i, rr);
+    const double r1 = std::max(rr[0], rr[1]);
+    const phys::Vec3 xi{x[i][0], x[i][1], x[i][2]};
+    for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
+      const double h = bodies_.plane_gap(p, xi, r1);
+      gap_min = std::min(gap_min, h);
+      if (h < law_.h_cut) local_[1] += 1.0;
+    }
+    if (bodies_.segments().empty()) continue;
+    int nh = 0;
+    if (beam_->node_count(i) > 1) {
+      if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
+      const int j = atom->map(atom->tag[i] + 1);
+      if (j < 0) continue;  // beyond the ghost shell: counted by the rank that owns it
+      double rj[4];
+      beam_->section_radii(j, rj);
+      nh = bodies_.element_hits(xi, {x[j][0], x[j][1], x[j][2]}, std::max(r1, std::max(rj[0], rj[1])),
+                                law_.h_cut, hits);
+    } else {
+      nh = bodies_.node_hits(xi, r1, law_.h_cut, hits);
+    }
+    for (int b = 0; b < nh; ++b) {
+      local_[0] += 1.0;
+      gap_min = std::min(gap_min, hits[b].h);
+    }
+  }
+  local_[2] = -gap_min;
 }
 
 void FixFiberYarns::post_force(int) {
@@ -600,6 +490,11 @@ void FixFiberYarns::post_force(int) {
   int *mask = atom->mask;
   double **x = atom->x;
   local_[0] = local_[1] = 0.0;
+  sums_valid_ = false;
+  if (newton_) {
+    scan_contacts();
+    return;
+  }
   double gap_min = std::numeric_limits<double>::max();
   if (implicit_ && !impulse_) land_.assign(6 * static_cast<size_t>(nlocal), 0.0);
   for (int i = 0; i < nlocal; ++i) {
@@ -608,22 +503,24 @@ void FixFiberYarns::post_force(int) {
     beam_->section_radii(i, rr);
     const double r1 = std::max(rr[0], rr[1]);
     // planes
-    for (const Plane &pl : planes_) {
-      const double dist = (x[i][0] - pl.p[0]) * pl.n[0] + (x[i][1] - pl.p[1]) * pl.n[1] + (x[i][2] - pl.p[2]) * pl.n[2];
-      const double h = dist - r1;
+    for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
+      const double h = bodies_.plane_gap(p, {x[i][0], x[i][1], x[i][2]}, r1);
       if (h < law_.h_cut + 1e-3 * r1 + travel(i)) {
         local_[1] += 1.0;
-        apply_contact(i, pl.n.data(), h, r1, INFINITY, gap_min);
+        const phys::Vec3 &pn = bodies_.planes()[p].n;
+        const double n[3] = {pn.x, pn.y, pn.z};
+        apply_contact(i, n, h, r1, INFINITY, gap_min);
       }
     }
-    if (segs_.empty()) continue;
+    if (bodies_.segments().empty()) continue;
     if (beam_->node_count(i) > 1) {
       // element to the next node (owned by this node); a fiber's elements cover its nodes
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
       int j = atom->map(atom->tag[i] + 1);
       if (j < 0 || j >= nlocal)
         fiberform::fail_one(lmp, FLERR, "fix fiber/yarns: the next node of an element is not owned by this rank "
-                          "(element contact runs on one rank only)");
+                          "(the sub-integrated element contact runs on one rank only; implicit_force newton "
+                          "runs on any number)");
       double rj[4];
       beam_->section_radii(j, rj);
       element_yarn_contacts(i, j, std::max(r1, std::max(rj[0], rj[1])), gap_min);
@@ -632,7 +529,6 @@ void FixFiberYarns::post_force(int) {
     node_yarn_contacts(i, r1, gap_min);
   }
   local_[2] = -gap_min;
-  sums_valid_ = false;
 }
 
 /* Removal of whole fibers (all nodes) once any node is below remove_z_; as LAMMPS fix evaporate:

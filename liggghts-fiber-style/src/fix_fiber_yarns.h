@@ -12,8 +12,10 @@
        settle V M          every M steps: count consecutive checks with max node speed < V (m/s)
        settle_measure node|fiber   node speeds (default) or fiber centre-of-mass speeds
        integrator cvode|substep   contact sub-integration (default cvode, as pair_style fiber/dlvo)
-       implicit_force impulse|position  with implicit fibers: the averaged force handed to the step
-                           (default impulse: momentum exact, supports fibers leaning on yarns)
+       implicit_force newton|impulse|position  with implicit fibers: newton (default) = the contact
+                           law acts inside each fiber's Newton solve (physics/static_bodies.h, any
+                           number of ranks); impulse/position = sub-integrated averaged forces
+       s1_damping yes|no   PD form of the steric servo S1 (default yes with newton, else no)
        substeps N          velocity-Verlet sub-steps per step for `integrator substep` (default 100)
        friction mu         Coulomb friction coefficient against yarns and planes (default 0)
        terms LIST          comma list of vdw, es, steric (default steric)
@@ -23,19 +25,20 @@
 #define LMP_FIX_FIBER_YARNS_H
 
 #include <array>
-#include <unordered_map>
+#include <memory>
 #include <vector>
 
 #include "fix.h"
 #include "contact_integrator.h"
 #include "physics/contact_law.h"
+#include "physics/static_bodies.h"
 
 namespace LAMMPS_NS {
 
 class FixFiberYarns : public Fix {
  public:
   FixFiberYarns(class LAMMPS *lmp, int narg, char **arg);
-  ~FixFiberYarns() override = default;
+  ~FixFiberYarns() override;
   int setmask() override;
   void init() override;
   void setup(int vflag) override;
@@ -45,28 +48,22 @@ class FixFiberYarns : public Fix {
   double compute_vector(int n) override;
 
  private:
-  struct Segment { std::array<double, 3> a, b; double radius; int yarn; std::array<double, 3> c; double half; };
-  struct Plane { std::array<double, 3> p, n; };
-  void read_yarns(const char *path);
-  void build_bins();
   void apply_contact(int i, const double n[3], double h, double r1, double r2, double &gap_min);
   void apply_element_contact(int i, int j, double s, const double n[3], double h, double r1, double r2,
                              double &gap_min);
   void element_yarn_contacts(int i, int j, double r1, double &gap_min);
   void node_yarn_contacts(int i, double r1, double &gap_min);
-  void collect_segments(const double *p, std::vector<int> &out) const;
+  void read_yarns(const char *path);
+  void scan_contacts();
   void apply_friction(int i, int j, double s, const double n[3], double fn);
   void normal_solve(const double p[3], const double v[3], const double a[3], double inv_m, const double n[3],
                     double h, double r1, double r2, double &fpos, double &fvel);
   double applied_force(double fpos, double fvel) const;
   double travel(int i) const;
   void land_velocity(int i, int j, double wi, double wj, const double n[3], double fc, double fv, double inv_m);
-  long bin_key(int ix, int iy, int iz) const { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
 
-  std::vector<Segment> segs_;
-  std::vector<Plane> planes_;
-  std::unordered_map<long, std::vector<int>> bins_;
-  double bin_size_ = 0.0, bin_lo_[3] = {0, 0, 0};
+  fiberform::physics::StaticBodies bodies_;  // yarn segments (binned) and planes
+  std::unique_ptr<fiberform::physics::StaticContactModel> model_;  // implicit_force newton
   fiberform::physics::ContactLaw law_;
   int substeps_ = 100;
   double mu_ = 0.0;                 // Coulomb friction coefficient against yarns and planes
@@ -80,8 +77,6 @@ class FixFiberYarns : public Fix {
   double removed_fibers_ = 0, removed_mass_ = 0, removed_nodes_ = 0;
   double local_[3] = {0, 0, 0};  // yarn contacts, plane contacts, -min gap
   double sums_[3] = {0, 0, 0};
-  std::vector<int> cand_;           // scratch: candidate yarn segments of one element
-  double bin_reach_ = 0.0;          // reach of the bins beyond a yarn surface (set in init)
   bool sums_valid_ = false;
   bool implicit_ = false;           // fix fiber/beam integrates implicitly (set in init)
   double beta_eff_ = 0.5, gamma_eff_ = 1.0;  // its effective Newmark coefficients
@@ -89,6 +84,9 @@ class FixFiberYarns : public Fix {
   bool use_cvode_ = true;
   bool impulse_ = true;             // apply the impulse average (explicit, or implicit default)
   bool impulse_kw_ = true;          // keyword implicit_force impulse|position
+  bool newton_kw_ = true;           // keyword implicit_force newton (the default)
+  bool newton_ = false;             // contacts inside the implicit solve (set in init)
+  int s1_damping_kw_ = -1;          // -1: default (yes with newton)
   double failures_ = 0;
   std::vector<double> land_;        // implicit: per local atom velocity correction (3), force (3)
 };

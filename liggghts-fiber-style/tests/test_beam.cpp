@@ -7,18 +7,13 @@
 #include <cstdio>
 #include <random>
 
+#include "check.h"
 #include "physics/beam.h"
 
 using namespace fiberform::physics::beam;
 
 namespace {
-int failures = 0;
-void expect(bool ok, const char *what, double got = NAN, double want = NAN) {
-  if (!ok) {
-    std::fprintf(stderr, "FAIL: %s (got %.12g, want %.12g)\n", what, got, want);
-    ++failures;
-  }
-}
+using fiberform::check::expect;
 bool rel_close(double a, double b, double tol) { return std::fabs(a - b) <= tol * std::fmax(std::fabs(b), 1e-300); }
 
 std::mt19937_64 rng(12345);
@@ -227,6 +222,5 @@ int main() {
   test_damping();
   test_rotation_integrator();
   test_critical_steps();
-  std::printf("test_beam: %s\n", failures ? "FAILED" : "ok");
-  return failures ? 1 : 0;
+  return fiberform::check::finish("test_beam");
 }

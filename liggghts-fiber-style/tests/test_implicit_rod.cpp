@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "check.h"
 #include "physics/block_tridiag.h"
 #include "physics/implicit_rod.h"
 
@@ -17,13 +18,7 @@ using beam::Quat;
 using beam::Vec3;
 
 namespace {
-int failures = 0;
-void expect(bool ok, const char *what, double got = NAN, double want = NAN) {
-  if (!ok) {
-    std::fprintf(stderr, "FAIL: %s (got %.12g, want %.12g)\n", what, got, want);
-    ++failures;
-  }
-}
+using fiberform::check::expect;
 std::mt19937_64 rng(7);
 double uni(double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); }
 
@@ -222,10 +217,5 @@ int main() {
   test_free_node();
   test_spectral_radius();
   test_cantilever_statics();
-  if (failures) {
-    std::fprintf(stderr, "%d failure(s)\n", failures);
-    return 1;
-  }
-  std::printf("test_implicit_rod: all passed\n");
-  return 0;
+  return fiberform::check::finish("test_implicit_rod");
 }

@@ -671,6 +671,13 @@ class LaydownSection(_Section):
         "Velocity-Verlet sub-steps per step of each yarn/wall contact with contact_integrator "
         "substep (rejected with cvode)", "1", default=100, ge=1, le=100000,
     )  # fmt: skip
+    yarn_contact: Literal["newton", "averaged"] | None = choice(
+        "How yarns and the fiber_yarns side planes act on implicit fibers: newton (the law inside "
+        "each fiber's Newton solve, PD steric servo; docs/models/contact.md section 8) or averaged "
+        "(the contact point sub-integrated with contact_integrator, its impulse handed to the step). "
+        "Absent: newton with beam_integrator implicit, averaged with explicit",
+        default=None,
+    )
     inertia_scale: float = quantity(
         "fix fiber/beam inertia_scale (rotary inertia factor; speed option, 1 = real inertia)", "1",
         default=1.0, gt=0.0, le=1e8,
@@ -713,7 +720,22 @@ class LaydownSection(_Section):
         if self.contact_integrator == "cvode" and "contact_substeps" in self.model_fields_set:
             raise scene_problem("contact_substeps", "only used with contact_integrator substep",
                                 self.contact_substeps)
+        if self.yarn_contact == "newton" and self.beam_integrator == "explicit":
+            raise scene_problem("yarn_contact", "newton needs beam_integrator implicit (allowed "
+                                "with explicit: averaged)", self.yarn_contact)
+        if (self.yarn_contact_mode == "newton" and self.walls != "wall_fiber_dlvo"
+                and "contact_integrator" in self.model_fields_set):
+            raise scene_problem("contact_integrator", "only used with yarn_contact averaged or "
+                                "walls wall_fiber_dlvo (yarn_contact newton solves the contacts "
+                                "inside the fiber step)", self.contact_integrator)
         return self
+
+    @property
+    def yarn_contact_mode(self) -> str:
+        """yarn_contact with its default resolved: newton (implicit) or averaged (explicit)."""
+        if self.yarn_contact is not None:
+            return self.yarn_contact
+        return "newton" if self.beam_integrator == "implicit" else "averaged"
 
 
 class Scene(_Section):

@@ -26,6 +26,33 @@ inline int closest_point_index(Vec3 xa, Vec3 xb, int n, Vec3 p) {
   return k;
 }
 
+// Parameter in [0, 1] of the point of segment a-b closest to p.
+inline double closest_param_point_segment(Vec3 a, Vec3 b, Vec3 p) {
+  const Vec3 d = b - a;
+  const double dd = dot(d, d);
+  if (dd <= 0.0) return 0.0;
+  const double t = dot(p - a, d) / dd;
+  return t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+}
+
+// Closest points of segments p1-q1 (parameter s) and p2-q2 (parameter t), both clamped to [0, 1]
+// (the standard clamped solution of the 2 x 2 normal equations; parallel segments: s = 0).
+inline void closest_params_segment_segment(Vec3 p1, Vec3 q1, Vec3 p2, Vec3 q2, double &s, double &t) {
+  const Vec3 d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const double a = dot(d1, d1), e = dot(d2, d2), f = dot(d2, r);
+  auto clamp01 = [](double v) { return v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v); };
+  if (a <= 0.0 && e <= 0.0) { s = t = 0.0; return; }
+  if (a <= 0.0) { s = 0.0; t = clamp01(f / e); return; }
+  const double c = dot(d1, r);
+  if (e <= 0.0) { t = 0.0; s = clamp01(-c / a); return; }
+  const double b = dot(d1, d2);
+  const double denom = a * e - b * b;
+  s = denom > 1e-14 * a * e ? clamp01((b * f - c * e) / denom) : 0.0;
+  t = (b * s + f) / e;
+  if (t < 0.0) { t = 0.0; s = clamp01(-c / a); }
+  else if (t > 1.0) { t = 1.0; s = clamp01((b - c) / a); }
+}
+
 // ---- rectangular cross-sections (thesis 2.4.3): points are moved from the centre line towards
 // the partner along the line between the two centres until they reach the element surface.
 // The element is a prism with width w along e_w and thickness t along e_t (both orthogonal to

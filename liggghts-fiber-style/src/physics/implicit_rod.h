@@ -85,8 +85,47 @@ struct Node {
   double D[6] = {0, 0, 0, 0, 0, 0};  // -dF/dv (N s/m): xx yy zz xy xz yz
   double scale = 1e-5;               // length scale of the convergence test (m): the section radius
   bool fixed = false;                // clamped: position and frame held
+  double radius = 0;                 // section radius seen by the force models (m)
   // outputs (end of step)
   Vec3 Fint, Tint;  // internal (elastic + material damping) force and torque, spatial
+  Vec3 Fmodel;      // force of the NodeForceModels at the end of the step (N), spatial
+};
+
+// Derivatives of node forces F_k with respect to node positions and velocities, block tridiagonal
+// (3 x 3 blocks, row-major): d = (k, k), l = (k, k-1), u = (k, k+1).
+struct ForceJacobian {
+  std::vector<double> Kd, Kl, Ku, Cd, Cl, Cu;  // dF/dx (N/m), dF/dv (N s/m)
+  void reset(std::size_t n) {
+    for (std::vector<double> *v : {&Kd, &Kl, &Ku, &Cd, &Cl, &Cu}) v->assign(9 * n, 0.0);
+  }
+  // adds w K (dF_row/dx_col) and w C (dF_row/dv_col); col must be row or a neighbour
+  void add(std::size_t row, std::size_t col, double w, const double K[9], const double C[9]) {
+    std::vector<double> *kk = col == row ? &Kd : (col + 1 == row ? &Kl : (col == row + 1 ? &Ku : nullptr));
+    std::vector<double> *cc = col == row ? &Cd : (col + 1 == row ? &Cl : (col == row + 1 ? &Cu : nullptr));
+    if (!kk) return;
+    for (int i = 0; i < 9; ++i) {
+      (*kk)[9 * row + i] += w * K[i];
+      (*cc)[9 * row + i] += w * C[i];
+    }
+  }
+};
+
+// A force on the nodes that depends on their end-of-step state (positions, velocities) and is
+// evaluated at every Newton iterate (contact with static bodies: physics/static_bodies.h).
+class NodeForceModel {
+ public:
+  virtual ~NodeForceModel() = default;
+  // called at the start of every attempt of a (sub-)step of length h (s)
+  virtual void begin_step(double h) { (void)h; }
+  // adds the forces at the nodes' current state to F (N); if J: their derivatives too
+  virtual void evaluate(const std::vector<Node> &nodes, std::vector<Vec3> &F, ForceJacobian *J) = 0;
+  // largest fraction in (0, 1] of the translational correction dx (m, per node) the model accepts
+  // from the state of its last evaluation (a damped Newton step); 1 = no limit
+  virtual double limit(const std::vector<Node> &nodes, const std::vector<Vec3> &dx) const {
+    (void)nodes;
+    (void)dx;
+    return 1.0;
+  }
 };
 
 struct Element {  // between node k and k+1
@@ -152,8 +191,10 @@ class Stepper {
   }
 
   // One step of length h. On failure the nodes are left at their input state and ok = false.
+  // models: forces evaluated inside the Newton iteration (may be null or empty).
   Stats step(std::vector<Node> &nodes, const std::vector<Element> &elems, double h, const GenAlpha &g,
-             const Options &opt) {
+             const Options &opt, const std::vector<NodeForceModel *> *models = nullptr) {
+    models_ = models;
     Stats st;
     saved_ = nodes;
     st.ok = advance(nodes, elems, h, g, opt, 0, st);
@@ -279,6 +320,9 @@ class Stepper {
     const double bp = (1.0 - g.am) / (h * h * g.beta * (1.0 - g.af));
     const double gp = g.gamma / (h * g.beta);
     const double inv_tau = opt.tau_drag > 0 ? 1.0 / opt.tau_drag : 0.0;
+    const bool have_models = models_ && !models_->empty();
+    if (have_models)
+      for (NodeForceModel *m : *models_) m->begin_step(h);
     dQx_.assign(n, Vec3{});
     dQw_.assign(n, Vec3{});
     // predictor: the nodes stay where they are (dQ = 0), the other quantities from the scheme's
@@ -348,6 +392,12 @@ class Stepper {
             Dm_[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + 6 + c];
           }
       }
+      // forces of the models at the current iterate (and their tangent)
+      Fc_.assign(n, Vec3{});
+      if (have_models) {
+        if (tangent) jac_.reset(n);
+        for (NodeForceModel *m : *models_) m->evaluate(nodes, Fc_, tangent ? &jac_ : nullptr);
+      }
       // inertia, external forces, drag
       for (std::size_t k = 0; k < n; ++k) {
         Node &nd = nodes[k];
@@ -367,7 +417,7 @@ class Stepper {
         const double *D = nd.D;
         const Vec3 Ddv{D[0] * dv.x + D[3] * dv.y + D[4] * dv.z, D[3] * dv.x + D[1] * dv.y + D[5] * dv.z,
                        D[4] * dv.x + D[5] * dv.y + D[2] * dv.z};
-        const Vec3 rx = nd.m * nd.vdx - nd.F + Ddv + (nd.m * inv_tau) * nd.v;
+        const Vec3 rx = nd.m * nd.vdx - nd.F - Fc_[k] + Ddv + (nd.m * inv_tau) * nd.v;
         // rotation (body): J Wdot + W x J W - R^T T_ext + J W / tau
         const Vec3 JW = beam::hadamard(nd.J, nd.W);
         const Vec3 b = beam::qrot_t(nd.q, nd.T);
@@ -390,6 +440,16 @@ class Stepper {
             Dk[(3 + i) * 6 + 3 + j] += gp * (SW[i * 3 + j] * nd.J[j] - SJW[i * 3 + j]) - Sb[i * 3 + j];
           }
         }
+        if (!have_models) continue;
+        // the models' forces: S += -dF/dx - gp dF/dv (translational blocks)
+        double *Lk = &Lm_[k * 36], *Uk = &Um_[k * 36];
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) {
+            const std::size_t q = 9 * k + 3 * i + j;
+            Dk[i * 6 + j] -= jac_.Kd[q] + gp * jac_.Cd[q];
+            if (k > 0) Lk[i * 6 + j] -= jac_.Kl[q] + gp * jac_.Cl[q];
+            if (k + 1 < n) Uk[i * 6 + j] -= jac_.Ku[q] + gp * jac_.Cu[q];
+          }
       }
       if (tangent) {
         // symmetric diagonal scaling, then the block factorisation
@@ -423,7 +483,18 @@ class Stepper {
         turn = std::max(turn, std::sqrt(t2));
       }
       if (!std::isfinite(turn)) return false;
-      const double damp = turn > kMaxTurn ? kMaxTurn / turn : 1.0;
+      double damp = turn > kMaxTurn ? kMaxTurn / turn : 1.0;
+      if (have_models) {
+        // the models may shorten the correction further (contact gaps: static_bodies.h)
+        dxs_.assign(n, Vec3{});
+        for (std::size_t k = 0; k < n; ++k)
+          if (!nodes[k].fixed)
+            for (int i = 0; i < 3; ++i) dxs_[k][i] = damp * rhs_[k * 6 + i] * scale_[k * 6 + i];
+        double frac = 1.0;
+        for (NodeForceModel *m : *models_) frac = std::min(frac, m->limit(nodes, dxs_));
+        if (!(frac > 0.0)) return false;
+        damp *= frac;
+      }
       for (std::size_t k = 0; k < n; ++k) {
         Node &nd = nodes[k];
         if (nd.fixed) continue;
@@ -455,6 +526,7 @@ class Stepper {
       for (std::size_t k = 0; k < n; ++k) {
         Node &nd = nodes[k];
         const Node &s = start[k];
+        nd.Fmodel = Fc_[k];
         if (nd.fixed) continue;
         nd.ax = (1.0 / (1.0 - g.am)) * ((1.0 - g.af) * nd.vdx + g.af * s.vdx - g.am * s.ax);
         nd.aw = (1.0 / (1.0 - g.am)) * ((1.0 - g.af) * nd.vdw + g.af * s.vdw - g.am * s.aw);
@@ -468,6 +540,9 @@ class Stepper {
   }
 
   std::vector<Node> saved_;
+  const std::vector<NodeForceModel *> *models_ = nullptr;
+  ForceJacobian jac_;
+  std::vector<Vec3> Fc_, dxs_;
   std::vector<Vec3> dQx_, dQw_;
   std::vector<double> Dm_, Lm_, Um_, rhs_, scale_;
   std::vector<int> piv_;

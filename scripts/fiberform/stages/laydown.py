@@ -146,6 +146,7 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
               "settle",
               settle_speed if settle_speed is not None else ld.settle_speed_m_s, steps_per_check, "settle_measure", ld.settle_measure,
               *contact_integrator_words(ld, wall=False),
+              "implicit_force", "newton" if ld.yarn_contact_mode == "newton" else "impulse",
               "terms", terms, "friction", ld.friction_coefficient)
     c = scene.contact
     if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
@@ -597,12 +598,19 @@ def approximations(scene: Scene) -> list[str]:
         "drag per element at its centre",
         "yarn contact per fiber element (closest points of the element's and the yarn segment's "
         "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
-        "node; radius max(a1, a2); the contact point's motion sub-integrated over the step with "
-        "the nodes' other forces held constant ("
-        + ("CVODE" if ld.contact_integrator == "cvode" else f"{ld.contact_substeps} sub-steps")
-        + "), terms "
-        f"{','.join(ld.terms)}; Coulomb friction {ld.friction_coefficient:g} on yarns and "
-        "planes (velocity-level stick/slip in fix fiber/yarns; not part of the thesis' law)",
+        "node; radius max(a1, a2); "
+        + ("the law acts inside each fiber's implicit Newton solve at the end-of-step state "
+           "(yarn_contact newton; steric servo S1 in PD form: every fiber-yarn collision sticks)"
+           if ld.yarn_contact_mode == "newton" else
+           "the contact point's motion sub-integrated over the step with the nodes' other forces "
+           "held constant ("
+           + ("CVODE" if ld.contact_integrator == "cvode" else f"{ld.contact_substeps} sub-steps")
+           + ")")
+        + f", terms {','.join(ld.terms)}; Coulomb friction {ld.friction_coefficient:g} on yarns "
+        "and planes (" + ("regularised stick/slip inside the Newton solve"
+                          if ld.yarn_contact_mode == "newton" else
+                          "velocity-level stick/slip in fix fiber/yarns")
+        + "; not part of the thesis' law)",
         "fibers are removed whole when any node passes the removal height",
     ]
     c = scene.contact

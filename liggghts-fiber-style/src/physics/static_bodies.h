@@ -1,0 +1,314 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Static bodies of the lay-down and pressing (thesis sec. 3.1): fabric yarns as chains of cylinders
+   (polyline segments with a radius) and planes, all of infinite mass; their contact geometry with
+   fiber elements and nodes; and StaticContactModel, the contact of one fiber with these bodies as
+   a force model INSIDE the implicit fiber step (physics/implicit_rod.h, NodeForceModel).
+   Pure classes, SI units, no LIGGGHTS dependency. Used by fix fiber/yarns (both integrators);
+   unit-tested in tests/test_static_bodies.cpp; documented in docs/models/contact.md
+   ("Static bodies in the implicit step") and docs/styles/fix_fiber_yarns.md.
+
+   Geometry: an element (straight segment xa-xb of fiber radius r) against a yarn acts at the closest
+   points of the two centre lines, per yarn the segment with the smallest gap h = |d| - r - R
+   (d from the yarn axis to the element point, n = d/|d| the normal towards the fiber); a node
+   (single-node fiber) likewise with the closest point of each yarn's centre line; a node against a
+   plane (point p, unit normal n towards the fibers) at h = n.(x - p) - r.
+
+   The implicit model: at the fiber's end-of-step state x_{n+1}, v_{n+1} (every Newton iterate) the
+   contact point of parameter s (lever weights w_a = 1 - s, w_b = s) carries the normal force of the
+   fiber/dlvo law, F(h, u) n with u = n.v_point (physics/contact_law.h, the same law and parameters as
+   pair_style fiber/dlvo; reduced mass = the point's effective mass 1/(w_a^2/m_a + w_b^2/m_b)), and
+   optionally Coulomb friction regularised at the velocity scale where it stops the point within a
+   step (f_t = -mu F v_t / sqrt(|v_t|^2 + v_eps^2), v_eps = mu F / c_stick, c_stick = kStick m / h).
+   Tangent: dF/dh n n^T (position) and dF/du n n^T (velocity), central differences of the scalar law,
+   the geometric stiffness of the rotating normal left out (it is F/|d| against dF/dh); friction by its
+   secant coefficient. The correction limiter keeps one Newton iteration from moving a contact gap
+   from outside to more than the servo's linear range h_cap below contact (h = 0), or from that deep
+   to beyond h_R + h_cap (the law saturates there: a full correction would jump between the
+   saturated force and no force): the whole correction is scaled so that the gap lands on h = 0. */
+#ifndef FIBERFORM_PHYSICS_STATIC_BODIES_H
+#define FIBERFORM_PHYSICS_STATIC_BODIES_H
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+#include <vector>
+
+#include "contact_geometry.h"
+#include "contact_law.h"
+#include "implicit_rod.h"
+#include "vec3.h"
+
+namespace fiberform::physics {
+
+// One contact candidate: element parameter s (0 for a node), unit normal from the body to the fiber,
+// surface gap h (m), radius of the body (inf for a plane).
+struct BodyHit {
+  double s = 0.0;
+  Vec3 n;
+  double h = 0.0;
+  double r2 = 0.0;
+};
+
+class StaticBodies {
+ public:
+  static constexpr int kMaxHits = 8;  // yarns acting on one element at once
+  struct Segment {
+    Vec3 a, b, c;  // ends and centre (m)
+    double radius = 0, half = 0;
+    int yarn = 0;
+  };
+  struct Plane {
+    Vec3 p, n;  // a point and the unit normal towards the fibers
+  };
+
+  void add_segment(Vec3 a, Vec3 b, double radius, int yarn) {
+    Segment s;
+    s.a = a;
+    s.b = b;
+    s.c = 0.5 * (a + b);
+    s.half = 0.5 * norm(b - a);
+    s.radius = radius;
+    s.yarn = yarn;
+    segs_.push_back(s);
+    bins_valid_ = false;
+  }
+  // false if n is zero
+  bool add_plane(Vec3 p, Vec3 n) {
+    const double nn = norm(n);
+    if (!(nn > 0.0)) return false;
+    planes_.push_back({p, (1.0 / nn) * n});
+    return true;
+  }
+  const std::vector<Segment> &segments() const { return segs_; }
+  const std::vector<Plane> &planes() const { return planes_; }
+
+  // Bins of segment capsules reaching `reach` (m) beyond each yarn surface: a point's bin then holds
+  // every segment whose surface is within `reach` of it.
+  void build_bins(double reach) {
+    reach_ = std::max(reach, reach_);
+    bins_.clear();
+    bins_valid_ = true;
+    if (segs_.empty()) return;
+    double rmax = 0.0, lmax = 0.0;
+    for (int k = 0; k < 3; ++k) lo_[k] = std::numeric_limits<double>::max();
+    for (const Segment &s : segs_) {
+      rmax = std::max(rmax, s.radius);
+      lmax = std::max(lmax, 2.0 * s.half);
+      for (int k = 0; k < 3; ++k) lo_[k] = std::min(lo_[k], std::min(s.a[k], s.b[k]));
+    }
+    size_ = std::max(rmax, lmax);
+    const double r = std::max(rmax, reach_);
+    for (int k = 0; k < 3; ++k) lo_[k] -= 2.0 * size_;
+    for (int id = 0; id < static_cast<int>(segs_.size()); ++id) {
+      const Segment &s = segs_[id];
+      int lo[3], hi[3];
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = static_cast<int>(std::floor((std::min(s.a[k], s.b[k]) - s.radius - r - lo_[k]) / size_));
+        hi[k] = static_cast<int>(std::floor((std::max(s.a[k], s.b[k]) + s.radius + r - lo_[k]) / size_));
+      }
+      for (int a = lo[0]; a <= hi[0]; ++a)
+        for (int b = lo[1]; b <= hi[1]; ++b)
+          for (int c = lo[2]; c <= hi[2]; ++c) bins_[key(a, b, c)].push_back(id);
+    }
+  }
+  double reach() const { return reach_; }
+
+  // Yarns near element xa-xb of radius r: per yarn the closest segment, when h < margin.
+  // The element must be shorter than reach() - r - margin for the lookup at its midpoint to be complete.
+  int element_hits(Vec3 xa, Vec3 xb, double r, double margin, BodyHit out[kMaxHits]) const {
+    const Vec3 mid = 0.5 * (xa + xb);
+    const std::vector<int> *cand = lookup(mid);
+    if (!cand) return 0;
+    const double half_e = 0.5 * norm(xb - xa);
+    int yarn[kMaxHits];
+    int nhit = 0;
+    for (int id : *cand) {
+      const Segment &sg = segs_[id];
+      const Vec3 dc = mid - sg.c;
+      const double reach = half_e + sg.half + sg.radius + r + margin;
+      if (dot(dc, dc) > reach * reach) continue;
+      double se, ty;
+      closest_params_segment_segment(xa, xb, sg.a, sg.b, se, ty);
+      const Vec3 d = lerp(xa, xb, se) - lerp(sg.a, sg.b, ty);
+      const double dist = norm(d);
+      const double h = dist - sg.radius - r;
+      if (h >= margin || !(dist > 0.0)) continue;
+      insert(out, yarn, nhit, sg.yarn, se, (1.0 / dist) * d, h, sg.radius);
+    }
+    return nhit;
+  }
+  // Yarns near a node at x of radius r (single-node fibers).
+  int node_hits(Vec3 x, double r, double margin, BodyHit out[kMaxHits]) const {
+    const std::vector<int> *cand = lookup(x);
+    if (!cand) return 0;
+    int yarn[kMaxHits];
+    int nhit = 0;
+    for (int id : *cand) {
+      const Segment &sg = segs_[id];
+      const Vec3 d = x - lerp(sg.a, sg.b, closest_param_point_segment(sg.a, sg.b, x));
+      const double dist = norm(d);
+      const double h = dist - sg.radius - r;
+      if (h >= margin || !(dist > 0.0)) continue;
+      insert(out, yarn, nhit, sg.yarn, 0.0, (1.0 / dist) * d, h, sg.radius);
+    }
+    return nhit;
+  }
+  // Gap of a node (radius r) to plane k.
+  double plane_gap(int k, Vec3 x, double r) const { return dot(x - planes_[k].p, planes_[k].n) - r; }
+
+ private:
+  static long key(int ix, int iy, int iz) { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
+  const std::vector<int> *lookup(Vec3 p) const {
+    if (segs_.empty() || !bins_valid_) return nullptr;
+    const int bx = static_cast<int>(std::floor((p.x - lo_[0]) / size_));
+    const int by = static_cast<int>(std::floor((p.y - lo_[1]) / size_));
+    const int bz = static_cast<int>(std::floor((p.z - lo_[2]) / size_));
+    auto it = bins_.find(key(bx, by, bz));
+    return it == bins_.end() ? nullptr : &it->second;
+  }
+  // keep the smallest gap per yarn
+  static void insert(BodyHit out[kMaxHits], int yarn[kMaxHits], int &nhit, int y, double s, Vec3 n, double h,
+                     double r2) {
+    int slot = -1;
+    for (int b = 0; b < nhit; ++b)
+      if (yarn[b] == y) slot = b;
+    if (slot < 0) {
+      if (nhit == kMaxHits) return;
+      slot = nhit++;
+      yarn[slot] = y;
+      out[slot].h = std::numeric_limits<double>::max();
+    }
+    if (h < out[slot].h) out[slot] = {s, n, h, r2};
+  }
+
+  std::vector<Segment> segs_;
+  std::vector<Plane> planes_;
+  std::unordered_map<long, std::vector<int>> bins_;
+  bool bins_valid_ = false;
+  double size_ = 1.0, lo_[3] = {0, 0, 0}, reach_ = 0.0;
+};
+
+// Contact of one fiber with the static bodies inside its implicit step (see the file comment).
+class StaticContactModel : public rod::NodeForceModel {
+ public:
+  static constexpr double kStick = 100.0;  // stick damping c_stick = kStick m / h
+
+  StaticContactModel(const StaticBodies &bodies, const ContactLaw &law, double friction)
+      : bodies_(bodies), law_(law), mu_(friction) {}
+
+  void begin_step(double h) override { h_ = h; }
+
+  void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
+    near_.clear();
+    contacts_ = 0;
+    min_gap_ = std::numeric_limits<double>::max();
+    const std::size_t n = nodes.size();
+    BodyHit hits[StaticBodies::kMaxHits];
+    const double margin = law_.h_cut;
+    for (std::size_t k = 0; k < n; ++k) {
+      const rod::Node &a = nodes[k];
+      for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
+        const double h = bodies_.plane_gap(p, a.x, a.radius);
+        if (h < a.radius + margin) act(nodes, F, J, static_cast<int>(k), -1, {0.0, bodies_.planes()[p].n, h, INFINITY});
+      }
+      if (bodies_.segments().empty()) continue;
+      if (n == 1) {
+        const int nh = bodies_.node_hits(a.x, a.radius, a.radius + margin, hits);
+        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), -1, hits[q]);
+      } else if (k + 1 < n) {
+        const rod::Node &b = nodes[k + 1];
+        const double r = std::max(a.radius, b.radius);
+        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits);
+        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q]);
+      }
+    }
+  }
+
+  double limit(const std::vector<rod::Node> &, const std::vector<Vec3> &dx) const override {
+    // landing gap 0: there the servo S1 has its full bell (B1(0) = 1) and stiffness; at h_R both
+    // vanish (B1(h_R) = B1'(h_R) = 0) and the next iterate would not see the contact
+    double frac = 1.0;
+    const double hR = law_.steric.h_R, cap = law_.steric.cap(), land = 0.0;
+    for (const Near &c : near_) {
+      Vec3 d = c.wa * dx[c.a];
+      if (c.b >= 0) d = d + c.wb * dx[c.b];
+      const double dh = dot(c.n, d);
+      const double h1 = c.h + dh;
+      if (c.h > land && h1 < land - cap) frac = std::min(frac, (c.h - land) / (c.h - h1));
+      else if (c.h < land - cap && h1 > hR + cap) frac = std::min(frac, (land - c.h) / (h1 - c.h));
+    }
+    return frac;
+  }
+
+  int contacts() const { return contacts_; }    // gaps below h_cut at the last evaluation
+  double min_gap() const { return min_gap_; }   // smallest gap at the last evaluation (m)
+
+ private:
+  struct Near {
+    int a, b;
+    double wa, wb;
+    Vec3 n;
+    double h;
+  };
+
+  // one contact point: element a-b (b < 0: node a) at the hit
+  void act(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J, int a, int b,
+           const BodyHit &hit) {
+    const double wa = b < 0 ? 1.0 : 1.0 - hit.s, wb = b < 0 ? 0.0 : hit.s;
+    near_.push_back({a, b, wa, wb, hit.n, hit.h});
+    min_gap_ = std::min(min_gap_, hit.h);
+    if (hit.h >= law_.h_cut) return;
+    ++contacts_;
+    const rod::Node &A = nodes[static_cast<std::size_t>(a)];
+    const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
+    const Vec3 v = B ? wa * A.v + wb * B->v : A.v;
+    const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
+    const double r1 = B ? std::max(A.radius, B->radius) : A.radius;
+    PairLaw pl;
+    pl.setup(law_, r1, hit.r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(hit.r2));
+    const double u = dot(hit.n, v);
+    const double f = pl.force(hit.h, u);
+    Vec3 fp = f * hit.n;
+    double cf = 0.0;  // friction secant coefficient (N s/m)
+    Vec3 vt;
+    if (mu_ > 0.0 && f > 0.0 && h_ > 0.0) {
+      vt = v - u * hit.n;
+      const double c_stick = kStick / (inv_m * h_);
+      const double v_eps = mu_ * f / c_stick;
+      cf = mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
+      fp = fp - cf * vt;
+    }
+    F[static_cast<std::size_t>(a)] = F[static_cast<std::size_t>(a)] + wa * fp;
+    if (B) F[static_cast<std::size_t>(b)] = F[static_cast<std::size_t>(b)] + wb * fp;
+    if (!J) return;
+    const double dh = 1e-3 * law_.steric.h_R;
+    const double dFdh = (pl.force(hit.h + dh, u) - pl.force(hit.h - dh, u)) / (2.0 * dh);
+    const double du = 1e-6 + 1e-4 * std::fabs(u);
+    const double dFdu = (pl.force(hit.h, u + du) - pl.force(hit.h, u - du)) / (2.0 * du);
+    double Kx[9], Cv[9];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        const double nn = hit.n[i] * hit.n[j];
+        Kx[i * 3 + j] = dFdh * nn;
+        Cv[i * 3 + j] = dFdu * nn - cf * ((i == j ? 1.0 : 0.0) - nn);
+      }
+    J->add(static_cast<std::size_t>(a), static_cast<std::size_t>(a), wa * wa, Kx, Cv);
+    if (!B) return;
+    J->add(static_cast<std::size_t>(a), static_cast<std::size_t>(b), wa * wb, Kx, Cv);
+    J->add(static_cast<std::size_t>(b), static_cast<std::size_t>(a), wa * wb, Kx, Cv);
+    J->add(static_cast<std::size_t>(b), static_cast<std::size_t>(b), wb * wb, Kx, Cv);
+  }
+
+  const StaticBodies &bodies_;
+  const ContactLaw &law_;
+  double mu_ = 0.0;
+  double h_ = 0.0;
+  std::vector<Near> near_;
+  int contacts_ = 0;
+  double min_gap_ = 0.0;
+};
+
+}  // namespace fiberform::physics
+
+#endif
