@@ -5,6 +5,8 @@ the pydantic models, so a new field without an effect (or without an entry in AL
 this test. No binaries needed: the input is rendered by the stage's own function."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import yaml
 
@@ -36,6 +38,7 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "contact_substeps": 37, "inertia_scale": 10.0, "stiffness_scale": 0.5,
         "beam_integrator": "explicit", "rho_inf": 0.8, "newton_tolerance": 1.0e-9,
         "newton_max_iterations": 40, "damping_time_s": 1.0e-6, "yarn_contact": "newton",
+        "restart_interval_s": 1.0e-3, "ranks": 2,
     },
     "contact": {
         "integrator": "cvode", "terms": ["vdw", "steric"], "hamaker_J": 1.0e-20,
@@ -45,13 +48,21 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
 }
 # fields whose only value cannot be changed (a single allowed choice)
 SINGLE_CHOICE = {("contact", "model")}
+# fields that configure how fiberdem is launched, not its input
+LAUNCH = {("laydown", "ranks")}
+
+
+def scene_with(section: str | None = None, field: str | None = None,
+               base: dict[str, object] | None = None):  # type: ignore[no-untyped-def]
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["laydown"].update(base or {})
+    if section is not None and field is not None:
+        data[section][field] = ALTERNATIVES[section][field]
+    return parse_scene(data, "fields.yaml")
 
 
 def render(section: str | None = None, field: str | None = None) -> str:
-    data = yaml.safe_load(yaml.safe_dump(BASE))
-    if section is not None and field is not None:
-        data[section][field] = ALTERNATIVES[section][field]
-    return laydown.render_input(parse_scene(data, "fields.yaml"), U_S)
+    return laydown.render_input(scene_with(section, field), U_S)
 
 
 def cases() -> list[tuple[str, str]]:
@@ -68,4 +79,10 @@ def test_every_field_has_an_alternative() -> None:
 
 @pytest.mark.parametrize("section,field", cases())
 def test_field_changes_the_generated_input(section: str, field: str) -> None:
+    if (section, field) in LAUNCH:
+        build, newton = Path("build"), {"yarn_contact": "newton"}  # > 1 rank needs newton
+        assert (laydown.launch(scene_with(base=newton), build)
+                != laydown.launch(scene_with(section, field, newton), build)), \
+            f"{section}.{field} does not reach the fiberdem launch"
+        return
     assert render() != render(section, field), f"{section}.{field} does not reach the input"

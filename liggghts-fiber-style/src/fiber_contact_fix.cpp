@@ -12,6 +12,7 @@
 #include "fix_fiber_beam.h"
 #include "fix.h"
 #include "force.h"
+#include "modify.h"
 #include "memory.h"
 #include "update.h"
 
@@ -45,7 +46,7 @@ FiberContactFix::~FiberContactFix() {
   memory->destroy(tpost_b_);
 }
 
-int FiberContactFix::setmask() { return PRE_FORCE | POST_FORCE | END_OF_STEP; }
+int FiberContactFix::setmask() { return PRE_FORCE | POST_FORCE | FINAL_INTEGRATE | END_OF_STEP; }
 
 void FiberContactFix::init() {
   fiberform::check_atom_layout(lmp);
@@ -53,6 +54,9 @@ void FiberContactFix::init() {
   engine_->init();
   reach_ = interaction_reach();
   beam_ = FixFiberBeam::find(lmp);
+  if (implicit_beam() && !beam_->precedes(this))
+    error->all(FLERR, "fiber contact (pair_style fiber/dlvo, fix wall/fiber/dlvo): define it after fix "
+                      "fiber/beam (its velocity landing follows the implicit solve)");
 }
 
 bool FiberContactFix::implicit_beam() const { return beam_ && beam_->implicit(); }
@@ -170,11 +174,14 @@ void FiberContactFix::setup(int vflag) {
 }
 
 void FiberContactFix::end_of_step() {
-  if (!subintegrating()) return;
-  if (!implicit_beam()) {
-    solve_step();
-    return;
-  }
+  if (!subintegrating() || implicit_beam()) return;
+  solve_step();
+}
+
+/* Implicit fibers: right after fix fiber/beam's solve (this fix comes later in the fix list: init
+   checks it), so that every end_of_step hook (settle checks, output) sees the landed velocities. */
+void FiberContactFix::final_integrate() {
+  if (!subintegrating() || !implicit_beam()) return;
   // implicit: the constant force F = F_pos/(2 beta_eff) landed the points on the ODE end
   // positions but changed their velocities by gamma_eff dt F/m; land them on the ODE end velocities
   // as well (impulse F_vel dt): v += dt/m (F_vel - gamma_eff F), and take F out of the scheme's

@@ -25,7 +25,9 @@
         equation already has): F = m y(dt) / (beta_eff dt^2) = F_pos / (2 beta_eff), added to f and
         held constant over the step by the implicit solve (a rigid point then lands exactly on the
         ODE end position);
-     4. in end_of_step, after the implicit solve, the velocity is landed on the ODE end velocity as
+     4. in final_integrate, right after the implicit solve (this fix must come after fix fiber/beam
+        in the fix list; init checks it) and before any end_of_step hook reads velocities (settle
+        checks, output), the velocity is landed on the ODE end velocity as
         well, v += dt/m (F_vel - gamma_eff F), and F is taken out of the generalized-alpha
         acceleration history (FixFiberBeam::remove_from_history). Without both, a collision shorter
         than the step changes the velocity by up to gamma/beta (1.9 at rho_inf 0.5) times the right
@@ -50,6 +52,7 @@ class FiberContactFix : public Fix {
   void pre_force(int) override;
   void post_force(int) override;
   void end_of_step() override;
+  void final_integrate() override;
   double extend_cut_ghost() override;
 
   void grow_arrays(int) override;

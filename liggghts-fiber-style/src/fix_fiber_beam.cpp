@@ -214,6 +214,14 @@ FixFiberBeam *FixFiberBeam::find(LAMMPS *lmp) {
   return nullptr;
 }
 
+bool FixFiberBeam::precedes(const Fix *other) const {
+  for (int k = 0; k < modify->nfix; ++k) {
+    if (modify->fix[k] == this) return true;
+    if (modify->fix[k] == other) return false;
+  }
+  return false;
+}
+
 void FixFiberBeam::frame(int i, double t1[3], double t2[3], double t3[3]) const {
   const bm::Quat q = quat(&node_[i][QW]);
   put(t1, bm::qrot(q, {1, 0, 0}));
@@ -583,10 +591,13 @@ void FixFiberBeam::setup(int vflag) {
   pre_force(vflag);
   compute_critical_steps(true);
   if (implicit_) {
-    // internal forces of the initial state (later ones come from the converged implicit steps)
+    // internal forces of the initial state (later ones come from the converged implicit steps;
+    // a node whose scheme state is already set, by an earlier run or a restart file, keeps them,
+    // so that a resumed run repeats the uninterrupted one)
     internal_forces_local();
     for (int i = 0; i < atom->nlocal; ++i) {
       if (!(atom->mask[i] & groupbit) || !is_node(i)) continue;
+      if (node_[i][ACCOK] > 0.5) continue;
       for (int k = 0; k < 3; ++k) {
         node_[i][FIX + k] = acc_[i][k] + acc_[i][6 + k];
         node_[i][TIX + k] = acc_[i][3 + k] + acc_[i][9 + k];
@@ -685,6 +696,9 @@ void FixFiberBeam::post_force(int) {
   if (implicit_) {
     for (int i = 0; i < nlocal; ++i) {
       if (!(mask[i] & groupbit) || !is_node(i)) continue;
+      // the velocity Jacobians of this step's external forces are added by the fixes after this
+      // one (fix fiber/drag checks that it comes later); a setup() before the step must not count
+      for (int k = 0; k < 6; ++k) node_[i][DJ0 + k] = 0.0;
       for (int k = 0; k < 3; ++k) {
         f[i][k] += node_[i][FIX + k];
         torque[i][k] += node_[i][TIX + k];

@@ -81,6 +81,8 @@ class FixFiberBeam : public Fix {
   void section_radii(int i, double r[4]) const;
   // the first fix fiber/beam defined in this LAMMPS instance, or nullptr
   static FixFiberBeam *find(class LAMMPS *lmp);
+  // true if this fix comes before `other` in the fix list (its hooks run first)
+  bool precedes(const Fix *other) const;
 
   // ---- time integration (docs/models/beam.md, "Implicit time integration") ----
   // true with `integrator implicit` (the default): positions, frames and velocities change only in

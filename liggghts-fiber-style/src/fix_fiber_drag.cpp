@@ -14,6 +14,7 @@
 #include "atom.h"
 #include "comm.h"
 #include "error.h"
+#include "modify.h"
 #include "fix_fiber_beam.h"
 #include "physics/drag.h"
 #include "physics/flow_grid.h"
@@ -102,6 +103,9 @@ void FixFiberDrag::init() {
   if (!beam_) error->all(FLERR, "fix fiber/drag: needs a fix fiber/beam (fiber topology and sections)");
   if (!atom->rmass_flag) error->all(FLERR, "fix fiber/drag: needs per-atom mass (atom_style sphere)");
   if (atom->map_style == 0) error->all(FLERR, "fix fiber/drag: needs 'atom_modify map array'");
+  if (beam_->implicit() && !beam_->precedes(this))
+    error->all(FLERR, "fix fiber/drag: define it after fix fiber/beam (the implicit step takes the drag's "
+                      "velocity Jacobian of the current step)");
 }
 
 void FixFiberDrag::setup(int vflag) { post_force(vflag); }

@@ -38,6 +38,7 @@ FixFiberYarns::~FixFiberYarns() {
 FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
   vector_flag = 1;
   size_vector = 8;
+  restart_global = 1;  // removal accounting and the settle counter survive a restart
   global_freq = 1;
   extvector = 0;
   law_.terms = phys::kSteric;
@@ -583,6 +584,26 @@ void FixFiberYarns::pre_exchange() {
     if (screen) std::fputs(msg.c_str(), screen);
     if (logfile) std::fputs(msg.c_str(), logfile);
   }
+}
+
+/* Restart: the removal accounting (fibers, mass, nodes) and the settle counter, so that a resumed
+   lay-down reports the same totals and stops at the same check as an uninterrupted one. */
+void FixFiberYarns::write_restart(FILE *fp) {
+  double list[5] = {removed_fibers_, removed_mass_, removed_nodes_, settled_checks_, max_speed_};
+  if (comm->me == 0) {
+    const int size = sizeof(list);
+    std::fwrite(&size, sizeof(int), 1, fp);
+    std::fwrite(list, sizeof(double), 5, fp);
+  }
+}
+
+void FixFiberYarns::restart(char *buf) {
+  const double *list = reinterpret_cast<double *>(buf);
+  removed_fibers_ = list[0];
+  removed_mass_ = list[1];
+  removed_nodes_ = list[2];
+  settled_checks_ = list[3];
+  max_speed_ = list[4];
 }
 
 double FixFiberYarns::compute_vector(int n) {

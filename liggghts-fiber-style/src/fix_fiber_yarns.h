@@ -46,6 +46,8 @@ class FixFiberYarns : public Fix {
   void pre_exchange() override;
   void end_of_step() override;
   double compute_vector(int n) override;
+  void write_restart(FILE *fp) override;
+  void restart(char *buf) override;
 
  private:
   void apply_contact(int i, const double n[3], double h, double r1, double r2, double &gap_min);

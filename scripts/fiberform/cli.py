@@ -124,7 +124,8 @@ def _context(args: argparse.Namespace, scene: Scene) -> StageContext:
         build_dir=Path(args.build_dir),
         force=args.force,
         oversubscribe=args.oversubscribe,
-        options={"force": args.force, "oversubscribe": args.oversubscribe},
+        options={"force": args.force, "oversubscribe": args.oversubscribe,
+                 "resume": args.resume},
     )
 
 
@@ -220,6 +221,12 @@ def build_parser() -> argparse.ArgumentParser:
             "--oversubscribe",
             action="store_true",
             help="allow more MPI ranks than cores (slow: for testing only)",
+        )
+        p.add_argument(
+            "--resume",
+            action="store_true",
+            help="continue an interrupted stage from its last restart file instead of starting "
+            "over (laydown; a stage without restart files starts over)",
         )
         add_build(p)
 

@@ -146,6 +146,15 @@ def file_token(name: str) -> Token:
     return Token(name, _TOKEN_KEY)
 
 
+def step_file_token(stem: str, ext: str) -> Token:
+    """A LIGGGHTS file name with the step substituted for ``*`` (``stem.*.ext``, e.g. the files of
+    the ``restart`` command); stem and ext are plain file names as for :func:`file_token`."""
+    for part in (stem, ext):
+        if not isinstance(part, str) or _FILE_NAME.fullmatch(part) is None:
+            raise InputFormatError(f"refusing file name part {part!r}")
+    return Token(f"{stem}.*.{ext}", _TOKEN_KEY)
+
+
 def ident_list(names: Sequence[str]) -> Token:
     """A comma-separated list of identifiers as one word (e.g. the `terms vdw,es,steric` of the
     contact styles); every name must be an identifier."""

@@ -671,6 +671,15 @@ class LaydownSection(_Section):
         "Velocity-Verlet sub-steps per step of each yarn/wall contact with contact_integrator "
         "substep (rejected with cvode)", "1", default=100, ge=1, le=100000,
     )  # fmt: skip
+    restart_interval_s: float = quantity(
+        "Simulated time between LIGGGHTS restart files of the lay-down (rounded to whole checks; "
+        "`fiberform laydown SCENE --resume` continues a killed run from the last one; 0: none)",
+        "s", default=5.0e-3, ge=0.0, le=1e3,
+    )  # fmt: skip
+    ranks: int = quantity(
+        "MPI ranks of the lay-down (> 1 needs yarn_contact newton; at most the machine's cores "
+        "unless --oversubscribe)", "1", default=1, ge=1, le=100000,
+    )  # fmt: skip
     yarn_contact: Literal["newton", "averaged"] | None = choice(
         "How yarns and the fiber_yarns side planes act on implicit fibers: newton (the law inside "
         "each fiber's Newton solve, PD steric servo; docs/models/contact.md section 8) or averaged "
@@ -720,6 +729,13 @@ class LaydownSection(_Section):
         if self.contact_integrator == "cvode" and "contact_substeps" in self.model_fields_set:
             raise scene_problem("contact_substeps", "only used with contact_integrator substep",
                                 self.contact_substeps)
+        if self.ranks > 1 and self.yarn_contact_mode != "newton":
+            raise scene_problem("ranks", "more than one rank needs yarn_contact newton (the "
+                                "sub-integrated yarn contact needs both nodes of an element on one "
+                                "rank)", self.ranks)
+        if 0.0 < self.restart_interval_s < self.check_interval_s:
+            raise scene_problem("restart_interval_s", "must be 0 or at least check_interval_s",
+                                self.restart_interval_s)
         if self.yarn_contact == "newton" and self.beam_integrator == "explicit":
             raise scene_problem("yarn_contact", "newton needs beam_integrator implicit (allowed "
                                 "with explicit: averaged)", self.yarn_contact)

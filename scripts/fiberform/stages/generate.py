@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..fiber_io import Fiber, quat_from_frames, write_fibers_liggghts
-from ..inputs import LiggghtsInput, file_token
+from ..inputs import LiggghtsInput, Token, file_token
 from ..provenance import file_hash, write_dataset
 from ._stage import Stage, StageContext
 
@@ -440,16 +440,25 @@ def _sampler_spec(section: Any, name: str, fallback: float | None) -> dict[str, 
     return spec.model_dump(exclude_none=True) if hasattr(spec, "model_dump") else dict(spec)
 
 
-def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object) -> None:
+def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,
+                   restart: Token | None = None) -> None:
     """The LIGGGHTS commands that load the generated fibers (DATA_NAME, NODES_NAME in the working
-    folder) under fix fiber/beam with ID ``beam``; ``beam_options`` are appended to that fix."""
+    folder) under fix fiber/beam with ID ``beam``; ``beam_options`` are appended to that fix.
+    With ``restart`` (a restart file of an earlier run of the same input) the atoms, the box and
+    the per-atom state of fix fiber/beam come from that file instead of DATA_NAME (units, atom
+    style, boundary and newton are stored in it)."""
     s.command("units", "si")
-    s.command("atom_style", "sphere")
+    if restart is None:
+        s.command("atom_style", "sphere")
     s.command("atom_modify", "map", "array", "sort", 0, 0.0)
-    s.command("boundary", "f", "f", "f")
-    s.command("newton", "on" if newton else "off")
-    s.command("communicate", "single", "vel", "yes")
-    s.command("read_data", file_token(DATA_NAME))
+    if restart is None:
+        s.command("boundary", "f", "f", "f")
+        s.command("newton", "on" if newton else "off")
+        s.command("communicate", "single", "vel", "yes")
+        s.command("read_data", file_token(DATA_NAME))
+    else:
+        s.command("read_restart", restart)
+        s.command("communicate", "single", "vel", "yes")
     s.command("neighbor", 0.1 * f.width_m, "bin")
     s.command("neigh_modify", "delay", 0)
     s.command("fix", "beam", "all", "fiber/beam", "nodes", file_token(NODES_NAME),

@@ -1,0 +1,132 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Stage laydown (issue 10): restart files, `fiberform laydown --resume` after a kill, and the
+lay-down on two MPI ranks. A tiny scene (6 fibers, real stiffness and inertia, implicit, 1 us) runs
+uninterrupted to max_time_s; then the lay-down is run again, killed (SIGKILL to the whole process
+group) after its second restart file, and resumed: the resumed sheet equals the uninterrupted one
+within TOL_RESUME; the same lay-down on 2 ranks equals the 1-rank sheet within TOL_RANKS (the
+per-fiber solves are identical; contact and drag forces are summed in another order, and the
+difference grows through the contacts over the run)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.system
+
+SCENE = """
+name: resume_laydown
+seed: 3
+output_dir: runs/%(out)s
+run: {timestep_s: 1.0e-7, duration_s: 1.0e-3}
+domain: {lo_m: [0.0, 0.0, 0.0], hi_m: [1.0e-3, 1.0e-3, 3.437e-3]}
+fibers: {count: 6, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
+         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}
+fiber_generation: {placement_lo_m: [0.0, 0.0, 2.66e-3], placement_hi_m: [1.0e-3, 1.0e-3, 2.9e-3]}
+fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}
+flow: {delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}
+laydown: {max_time_s: 0.006, check_interval_s: 5.0e-4, settle_speed_m_s: 1.0e-9,
+          settle_checks: 3, timestep_s: 1.0e-6, restart_interval_s: 1.0e-3, ranks: %(ranks)d}
+contact: {model: fiber_dlvo, integrator: substep, substeps: 20, terms: [steric],
+          points_per_element: 1}
+"""
+TOL_RESUME = 1e-9  # m: the resumed run repeats the uninterrupted one (restart files are exact)
+TOL_RANKS = 1e-6   # m, 5 % of the fiber radius
+
+
+def _scene(work: Path, out: str, ranks: int) -> Path:
+    p = work / f"{out}.yaml"
+    p.write_text(SCENE % {"out": out, "ranks": ranks})
+    return p
+
+
+def _sheet(h5: Path) -> tuple[np.ndarray, np.ndarray]:
+    with h5py.File(h5, "r") as h:
+        return h["sheet/x"][...], h["sheet/fiber_id"][...]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory, build_dir: Path,
+              fiberform_cmd: list[str]) -> tuple[Path, Path]:
+    """The uninterrupted 1-rank run (all stages)."""
+    if not (build_dir / "bin" / "fiberdem").is_file():
+        pytest.skip("fiberdem not built")
+    work = tmp_path_factory.mktemp("resume")
+    scene = _scene(work, "a", 1)
+    proc = subprocess.run([*fiberform_cmd, "run", scene.name, "--build-dir", str(build_dir)],
+                          cwd=work, capture_output=True, text=True, errors="replace", timeout=900)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return work, scene
+
+
+def test_restart_files_are_written(reference: tuple[Path, Path]) -> None:
+    work, _ = reference
+    names = sorted(p.name for p in (work / "runs/a/laydown/work").glob("laydown.*.restart"))
+    # every 1 ms of 6 ms: steps 1000 ... 6000
+    assert names == sorted(f"laydown.{k * 1000}.restart" for k in range(1, 7)), names
+
+
+def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], build_dir: Path,
+                                                  fiberform_cmd: list[str]) -> None:
+    work, scene = reference
+    x_ref, id_ref = _sheet(work / "runs/a/laydown/laydown.h5")
+    ref_copy = work / "reference.h5"
+    (work / "runs/a/laydown/laydown.h5").replace(ref_copy)
+    lw = work / "runs/a/laydown/work"
+    shutil.rmtree(lw)  # the restart files of the reference run must not be mistaken for new ones
+    proc = subprocess.Popen([*fiberform_cmd, "laydown", scene.name, "--force", "--build-dir",
+                             str(build_dir)], cwd=work, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    killed_after = None
+    try:
+        deadline = time.monotonic() + 600
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (lw / "laydown.3000.restart").is_file():
+                killed_after = 3000
+                break
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert killed_after is not None, "the lay-down ended before its third restart file"
+    assert not (work / "runs/a/laydown/laydown.h5").exists()  # no product of a killed run
+    res = subprocess.run([*fiberform_cmd, "laydown", scene.name, "--resume", "--build-dir",
+                          str(build_dir)], cwd=work, capture_output=True, text=True,
+                         errors="replace", timeout=900)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
+    with h5py.File(work / "runs/a/laydown/laydown.h5", "r") as h:
+        start = int(h["run"].attrs["resumed_from_step"])
+        steps = h["snapshots/step"][...]
+    assert 1000 <= start <= 3000 and start % 1000 == 0, start  # from a complete restart file
+    assert list(steps) == sorted(set(steps.tolist())), "snapshots repeated or out of order"
+    assert steps[-1] == 6000
+    x, ids = _sheet(work / "runs/a/laydown/laydown.h5")
+    assert np.array_equal(ids, id_ref)
+    assert np.abs(x - x_ref).max() < TOL_RESUME, np.abs(x - x_ref).max()
+
+
+def test_two_ranks_lay_down_the_same_sheet(reference: tuple[Path, Path], build_dir: Path,
+                                           fiberform_cmd: list[str]) -> None:
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("needs 2 cores")
+    work, _ = reference
+    x_ref, id_ref = _sheet(work / "reference.h5" if (work / "reference.h5").is_file()
+                           else work / "runs/a/laydown/laydown.h5")
+    scene = _scene(work, "b", 2)
+    proc = subprocess.run([*fiberform_cmd, "run", scene.name, "--build-dir", str(build_dir)],
+                          cwd=work, capture_output=True, text=True, errors="replace", timeout=900)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    x, ids = _sheet(work / "runs/b/laydown/laydown.h5")
+    assert np.array_equal(ids, id_ref)
+    with h5py.File(work / "runs/b/laydown/laydown.h5", "r") as h:
+        assert int(h["run"].attrs["ranks"]) == 2
+    assert np.abs(x - x_ref).max() < TOL_RANKS, np.abs(x - x_ref).max()
