@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..fiber_io import Fiber, quat_from_frames, write_fibers_liggghts
-from ..inputs import LiggghtsInput, Token, file_token
+from ..inputs import STAR, LiggghtsInput, Token, file_token
 from ..provenance import file_hash, write_dataset
 from ._stage import Stage, StageContext
 
@@ -441,13 +441,16 @@ def _sampler_spec(section: Any, name: str, fallback: float | None) -> dict[str, 
 
 
 def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,
-                   restart: Token | None = None) -> None:
+                   restart: Token | None = None, flat_decomposition: bool = False) -> None:
     """The LIGGGHTS commands that load the generated fibers (DATA_NAME, NODES_NAME in the working
     folder) under fix fiber/beam with ID ``beam``; ``beam_options`` are appended to that fix.
     With ``restart`` (a restart file of an earlier run of the same input) the atoms, the box and
     the per-atom state of fix fiber/beam come from that file instead of DATA_NAME (units, atom
-    style, boundary and newton are stored in it)."""
+    style, boundary and newton are stored in it). ``flat_decomposition``: MPI ranks split the box
+    in x and y only (a sheet is a thin layer: a split in z would leave it on one rank)."""
     s.command("units", "si")
+    if flat_decomposition:
+        s.command("processors", STAR, STAR, 1)
     if restart is None:
         s.command("atom_style", "sphere")
     s.command("atom_modify", "map", "array", "sort", 0, 0.0)

@@ -146,7 +146,8 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
                    "inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
                    "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
                    "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
-                   "newton_max", ld.newton_max_iterations, restart=restart)
+                   "newton_max", ld.newton_max_iterations, restart=restart,
+                   flat_decomposition=True)
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
@@ -311,6 +312,24 @@ def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Ar
     for chunk in np.array_split(idx, max(1, len(idx) // 200)):
         d = segment_distances(x[chunk], x[chunk + 1], a, b) - r[None, :]
         out = min(out, float(d.min()))
+    return out
+
+
+def fiber_fiber_clearance(x: Array, offsets: Array, radius: float) -> float:
+    """Smallest (distance between the centre lines of two elements of DIFFERENT fibers - the fiber
+    radius) over all such pairs, m (< 0: a fiber's centre line inside another fiber: a
+    pass-through; the contact law's own overlaps are nanometres)."""
+    owner = np.concatenate([np.full(max(0, hi - lo - 1), k) for k, (lo, hi) in
+                            enumerate(zip(offsets[:-1], offsets[1:]))] or [np.zeros(0)]).astype(np.int64)
+    idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])
+                          if hi - lo > 1] or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+    if len(idx) < 2 or len(np.unique(owner)) < 2:
+        return math.inf
+    out = math.inf
+    for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
+        d = segment_distances(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+        d[owner[chunk][:, None] == owner[None, :]] = math.inf
+        out = min(out, float(d.min()) - radius)
     return out
 
 
@@ -542,6 +561,9 @@ class Laydown(Stage):
                       "sum of LIGGGHTS node masses left (cross-check of sheet_mass)")
         clearances = np.array([element_clearance(*frame_fibers(fr.columns)[::2], pts, offs, rad)
                                if len(fr.ids) else math.inf for fr in frames])
+        fiber_clearances = np.array([
+            fiber_fiber_clearance(*frame_fibers(fr.columns)[::2], 0.5 * f.width_m)
+            if len(fr.ids) else math.inf for fr in frames])
         max_speeds = np.array([
             float(np.max(np.linalg.norm(np.stack([fr.columns[c] for c in ("vx", "vy", "vz")], 1), axis=1)))
             if len(fr.ids) else 0.0 for fr in frames])
@@ -575,6 +597,10 @@ class Laydown(Stage):
                       "smallest distance between a fiber element's centre line and a yarn "
                       "centre line minus the yarn radius, per snapshot (< 0: fiber passes "
                       "through a yarn)")
+        write_dataset(snap, "min_fiber_fiber_clearance", fiber_clearances, "m",
+                      "smallest distance between the centre lines of elements of two different "
+                      "fibers minus the fiber radius, per snapshot (< 0: a fiber passes through "
+                      "another)")
         write_dataset(snap, "max_speed", max_speeds, "m/s", "largest node speed per snapshot")
         write_dataset(snap, "max_fiber_speed", fiber_speeds, "m/s",
                       "largest fiber centre-of-mass speed per snapshot")
@@ -611,6 +637,10 @@ class Laydown(Stage):
             f"radius) over all {len(frames)} snapshots: {clearances.min() * 1e6:.3f} um "
             f"({'OK, >= 0' if clearances.min() >= 0 else 'VIOLATED'}; fiber radius "
             f"{0.5 * f.width_m * 1e6:.1f} um)",
+            f"- no fiber passes through another: smallest distance between the centre lines of "
+            f"elements of two fibers minus the fiber radius over all snapshots: "
+            f"{fiber_clearances.min() * 1e6:.3f} um "
+            f"({'OK, >= 0' if fiber_clearances.min() >= 0 else 'VIOLATED'})",
             f"- fiberdem wall time: {wall:.1f} s on {ld.ranks} rank(s)"
             + (f" (this part: resumed from the restart file of step {resume_step})"
                if resume_step is not None else ""), "",
