@@ -55,11 +55,13 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
     lmp->error->all(FLERR, "integrator: expected cvode | substep N | none");
   }
   if (!std::strcmp(kw, "implicit_force")) {
-    if (iarg + 1 >= narg) lmp->error->all(FLERR, "implicit_force: expected position | impulse");
+    if (iarg + 1 >= narg) lmp->error->all(FLERR, "implicit_force: expected position | impulse | newton");
     const char *v = arg[iarg + 1];
+    c.implicit_newton = false;
     if (!std::strcmp(v, "position")) { c.implicit_impulse = false; return 2; }
     if (!std::strcmp(v, "impulse")) { c.implicit_impulse = true; return 2; }
-    lmp->error->all(FLERR, "implicit_force: expected position | impulse");
+    if (!std::strcmp(v, "newton")) { c.implicit_newton = true; return 2; }
+    lmp->error->all(FLERR, "implicit_force: expected position | impulse | newton");
   }
   if (!std::strcmp(kw, "rtol")) { c.rtol = num(1); return 2; }
   if (!std::strcmp(kw, "atol")) { c.atol = num(1); return 2; }

@@ -47,6 +47,7 @@ struct EngineConfig {
   // implicit fiber/beam only: which averaged force the implicit step receives (fiber_contact_fix.h):
   // position landing with the external loads as a0 (default), or the impulse with every force as a0
   bool implicit_impulse = false;
+  bool implicit_newton = false;  // fix wall/fiber/dlvo: the plane inside the fibers' Newton solves
 };
 
 struct EngineStats {

@@ -154,11 +154,13 @@ void FiberContactFix::solve_step() {
 void FiberContactFix::setup_pre_force(int vflag) { pre_force(vflag); }
 
 void FiberContactFix::pre_force(int) {
+  if (in_newton_solve()) return;
   // integrator none: the force phase needs ghost mass shares and velocities
   if (!subintegrating()) prepare(false);
 }
 
 void FiberContactFix::setup(int vflag) {
+  if (in_newton_solve()) return;
   if (subintegrating() && implicit_beam()) {
     solve_implicit();
     return;
@@ -174,6 +176,7 @@ void FiberContactFix::setup(int vflag) {
 }
 
 void FiberContactFix::end_of_step() {
+  if (in_newton_solve()) return;
   if (!subintegrating() || implicit_beam()) return;
   solve_step();
 }
@@ -181,6 +184,7 @@ void FiberContactFix::end_of_step() {
 /* Implicit fibers: right after fix fiber/beam's solve (this fix comes later in the fix list: init
    checks it), so that every end_of_step hook (settle checks, output) sees the landed velocities. */
 void FiberContactFix::final_integrate() {
+  if (in_newton_solve()) return;
   if (!subintegrating() || !implicit_beam()) return;
   // implicit: the constant force F = F_pos/(2 beta_eff) landed the points on the ODE end
   // positions but changed their velocities by gamma_eff dt F/m; land them on the ODE end velocities
@@ -202,6 +206,7 @@ void FiberContactFix::final_integrate() {
 }
 
 void FiberContactFix::post_force(int) {
+  if (in_newton_solve()) return;
   double **f = atom->f;
   if (subintegrating() && implicit_beam()) {
     solve_implicit();

@@ -53,6 +53,9 @@ class FiberContactFix : public Fix {
   void post_force(int) override;
   void end_of_step() override;
   void final_integrate() override;
+  // true when the contacts act inside the implicit fiber solves instead (fix wall/fiber/dlvo
+  // implicit_force newton): the sub-integration hooks then do nothing
+  virtual bool in_newton_solve() const { return false; }
   double extend_cut_ghost() override;
 
   void grow_arrays(int) override;
@@ -77,20 +80,20 @@ class FiberContactFix : public Fix {
   // integrator none: is the instantaneous force added by the fix (wall) or by a pair (false)?
   virtual bool fix_applies_instantaneous() const { return true; }
   bool subintegrating() const { return engine_->cfg.integrator != fiberform::IntegratorKind::None; }
+  bool implicit_beam() const;
+  LAMMPS_NS::FixFiberBeam *beam_ = nullptr;  // set in init()
 
  private:
   void prepare(bool with_acc);   // shares, velocities, a0 of locals, forward comm to ghosts
   void solve_step();             // steps 1-4 above
   void solve_implicit();         // the implicit variant (post_force)
   void subintegrate_all();       // shared by both: all pairs into the sink buffers
-  bool implicit_beam() const;
   void grow_buffers();
   double **cpost_ = nullptr, **tpost_ = nullptr;  // per-atom, persistent (nmax)
   double **vbuf_ = nullptr, **acc_ = nullptr, *share_ = nullptr;  // nall
   double **fpre_ = nullptr, **fpost_ = nullptr, **tpre_ = nullptr, **tpost_b_ = nullptr;  // nall
   int nbuf_ = 0;
   double reach_ = 0.0;
-  LAMMPS_NS::FixFiberBeam *beam_ = nullptr;
 };
 
 }  // namespace LAMMPS_NS

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "error.h"
+#include "fix_fiber_beam.h"
 #include "force.h"
 #include "update.h"
 
@@ -50,9 +51,44 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
   own_engine_->cfg = cfg;
 }
 
-FixWallFiberDlvo::~FixWallFiberDlvo() { delete own_engine_; }
+FixWallFiberDlvo::~FixWallFiberDlvo() {
+  FixFiberBeam *beam = FixFiberBeam::find(lmp);
+  if (beam && model_) beam->remove_force_model(model_.get());
+  delete own_engine_;
+}
 
-void FixWallFiberDlvo::init() { FiberContactFix::init(); }
+void FixWallFiberDlvo::init() {
+  FiberContactFix::init();
+  newton_ = implicit_beam() && engine_->cfg.implicit_newton;
+  if (engine_->cfg.implicit_newton && !implicit_beam())
+    error->all(FLERR, "fix wall/fiber/dlvo: implicit_force newton needs fix fiber/beam integrator implicit");
+  const fiberform::Vec3 &vp = plane0_.velocity;
+  if (newton_ && (vp.x != 0.0 || vp.y != 0.0 || vp.z != 0.0))
+    error->all(FLERR, "fix wall/fiber/dlvo: implicit_force newton with a moving plate is not supported yet (a "
+                      "free fiber pushed by the plate leaves it at 1.9x the plate speed; "
+                      "docs/models/contact.md section 8): use implicit_force position or impulse");
+  if (newton_) {
+    if (!model_) {
+      bodies_.add_plane(plane0_.point, plane0_.normal, plane0_.velocity);
+      newton_law_ = engine_->cfg.law;
+      newton_law_.steric.s1_damping = true;  // the PD servo, as fix fiber/yarns (docs/models/contact.md 8)
+      model_ = std::make_unique<fiberform::physics::StaticContactModel>(bodies_, newton_law_, 0.0);
+    }
+    beam_->add_force_model(model_.get());
+  } else if (model_) {
+    beam_->remove_force_model(model_.get());
+  }
+}
+
+/* implicit_force newton: the plate's position at the end of this step, where the fibers are solved */
+void FixWallFiberDlvo::post_force(int vflag) {
+  if (!newton_) {
+    FiberContactFix::post_force(vflag);
+    return;
+  }
+  const double t = (update->ntimestep - step0_) * update->dt;
+  bodies_.set_plane_point(0, plane0_.point + t * plane0_.velocity);
+}
 
 void FixWallFiberDlvo::setup(int vflag) {
   if (!step0_set_) {

@@ -8,7 +8,10 @@
 #ifndef LMP_FIX_WALL_FIBER_DLVO_H
 #define LMP_FIX_WALL_FIBER_DLVO_H
 
+#include <memory>
+
 #include "fiber_contact_fix.h"
+#include "physics/static_bodies.h"
 
 namespace LAMMPS_NS {
 
@@ -18,6 +21,8 @@ class FixWallFiberDlvo : public FiberContactFix {
   ~FixWallFiberDlvo() override;
   void init() override;
   void setup(int) override;
+  void post_force(int) override;
+  bool in_newton_solve() const override { return newton_; }
 
  protected:
   void accumulate(bool subintegrate, const fiberform::NodeData &nd, const fiberform::NodeSinks &out) override;
@@ -28,6 +33,11 @@ class FixWallFiberDlvo : public FiberContactFix {
   fiberform::Plane plane0_{};  // plane at the time step time0_
   bigint step0_ = 0;
   bool step0_set_ = false;
+  // implicit_force newton: the plane as a static (moving) body of the fibers' Newton solves
+  bool newton_ = false;
+  fiberform::physics::StaticBodies bodies_;
+  fiberform::physics::ContactLaw newton_law_;
+  std::unique_ptr<fiberform::physics::StaticContactModel> model_;
 };
 
 }  // namespace LAMMPS_NS

@@ -56,6 +56,9 @@ void PairFiberDlvo::settings(int narg, char **arg) {
     iarg += used;
   }
   fiberform::validate_contact_config(lmp, "pair_style fiber/dlvo", cfg);
+  if (cfg.implicit_newton)
+    error->all(FLERR, "pair_style fiber/dlvo: implicit_force newton is for static bodies (fix wall/fiber/dlvo, "
+                      "fix fiber/yarns); fiber pairs take position or impulse");
   engine_->cfg = cfg;
   // the internal step fix exists from here on (so that thermo can name f_FIBER_DLVO_STEP[i])
   if (modify->find_fix(kStepFixId) < 0) {

@@ -48,6 +48,7 @@ struct BodyHit {
   Vec3 n;
   double h = 0.0;
   double r2 = 0.0;
+  Vec3 vb;  // velocity of the body (m/s): a moving plate; 0 for yarns
 };
 
 class StaticBodies {
@@ -60,6 +61,8 @@ class StaticBodies {
   };
   struct Plane {
     Vec3 p, n;  // a point and the unit normal towards the fibers
+    Vec3 v;     // velocity (m/s): a plate moving as a rigid body; p is its position at the time
+                // the fibers are solved for (the end of the step)
   };
 
   void add_segment(Vec3 a, Vec3 b, double radius, int yarn) {
@@ -74,12 +77,14 @@ class StaticBodies {
     bins_valid_ = false;
   }
   // false if n is zero
-  bool add_plane(Vec3 p, Vec3 n) {
+  bool add_plane(Vec3 p, Vec3 n, Vec3 v = Vec3{}) {
     const double nn = norm(n);
     if (!(nn > 0.0)) return false;
-    planes_.push_back({p, (1.0 / nn) * n});
+    planes_.push_back({p, (1.0 / nn) * n, v});
     return true;
   }
+  // moves plane k (a plate) to point p
+  void set_plane_point(int k, Vec3 p) { planes_[static_cast<std::size_t>(k)].p = p; }
   const std::vector<Segment> &segments() const { return segs_; }
   const std::vector<Plane> &planes() const { return planes_; }
 
@@ -179,7 +184,7 @@ class StaticBodies {
       yarn[slot] = y;
       out[slot].h = std::numeric_limits<double>::max();
     }
-    if (h < out[slot].h) out[slot] = {s, n, h, r2};
+    if (h < out[slot].h) out[slot] = BodyHit{s, n, h, r2, Vec3{}};
   }
 
   std::vector<Segment> segs_;
@@ -210,7 +215,9 @@ class StaticContactModel : public rod::NodeForceModel {
       const rod::Node &a = nodes[k];
       for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
         const double h = bodies_.plane_gap(p, a.x, a.radius);
-        if (h < a.radius + margin) act(nodes, F, J, static_cast<int>(k), -1, {0.0, bodies_.planes()[p].n, h, INFINITY});
+        if (h < a.radius + margin)
+          act(nodes, F, J, static_cast<int>(k), -1,
+              BodyHit{0.0, bodies_.planes()[p].n, h, INFINITY, bodies_.planes()[p].v});
       }
       if (bodies_.segments().empty()) continue;
       if (n == 1) {
@@ -262,7 +269,7 @@ class StaticContactModel : public rod::NodeForceModel {
     ++contacts_;
     const rod::Node &A = nodes[static_cast<std::size_t>(a)];
     const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
-    const Vec3 v = B ? wa * A.v + wb * B->v : A.v;
+    const Vec3 v = (B ? wa * A.v + wb * B->v : A.v) - hit.vb;  // relative to the body
     const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
     const double r1 = B ? std::max(A.radius, B->radius) : A.radius;
     PairLaw pl;
