@@ -52,8 +52,8 @@ const StyleEntry kStyles[] = {
      "fluid drag (thesis eq. 2.14-2.16), gravity and buoyancy on fiber/beam elements; uniform or grid flow",
      nullptr, &make_fix<LAMMPS_NS::FixFiberDrag>, nullptr},
     {StyleKind::Fix, "fiber/yarns",
-     "static yarn chains and planes (fiber/dlvo law, sub-integrated: CVODE or sub-steps) for fiber/beam "
-     "nodes; removes fibers",
+     "static yarn chains and planes (fiber/dlvo law inside each implicit fiber solve, or sub-integrated: "
+     "CVODE or sub-steps) for fiber/beam elements; removes fibers; settle check",
      nullptr, &make_fix<LAMMPS_NS::FixFiberYarns>, nullptr},
 };
 
