@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
 import tempfile
 import time
@@ -27,28 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
+from fiberform.provenance import machine_info
 from fiberform.scene import FabricSection, FlowSection, FluidSection
 from fiberform.stages.fabric import make_fabric
 from fiberform.stages.flow import FlowSetup, make_lattice, run_flow_case
 
 HERE = Path(__file__).resolve().parent
-
-
-def machine() -> dict[str, object]:
-    model = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {
-        "cpu": model,
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "load_average_at_start": os.getloadavg(),
-    }
 
 
 def main() -> int:
@@ -119,7 +101,7 @@ def main() -> int:
             "residual_tolerance": 1e-6,
         },
         "fabric_generation_s": t_fabric,
-        "machine": machine(),
+        "machine": machine_info(),
         "rows": rows,
     }
     (args.out / "flow_bench.json").write_text(json.dumps(result, indent=2) + "\n")

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -31,21 +30,10 @@ from typing import Any
 import h5py
 import yaml
 
+from fiberform.provenance import machine_info
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-
-
-def machine() -> dict[str, object]:
-    model = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {"cpu": model, "cores": os.cpu_count(), "python": platform.python_version(),
-            "load_average_at_start": os.getloadavg()}
 
 
 def variant(name: str, t_end: float, ranks: int) -> dict[str, Any]:
@@ -115,7 +103,7 @@ def main() -> int:
             print(f"{name}: 2-rank speed-up {by[1]['laydown_wall_s'] / by[2]['laydown_wall_s']:.2f}")
     args.out.mkdir(parents=True, exist_ok=True)
     out = args.out / "laydown_bench.json"
-    out.write_text(json.dumps({"machine": machine(), "time_s": args.time, "rows": rows}, indent=2) + "\n")
+    out.write_text(json.dumps({"machine": machine_info(), "time_s": args.time, "rows": rows}, indent=2) + "\n")
     print(f"wrote {out}")
     return 0
 

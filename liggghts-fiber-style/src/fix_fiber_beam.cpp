@@ -236,11 +236,14 @@ void FixFiberBeam::add_velocity_jacobian(int i, const double *D) {
   for (int k = 0; k < 6; ++k) node_[i][DJ0 + k] += D[k];
 }
 
-void FixFiberBeam::add_force_model(rod::NodeForceModel *m) {
-  if (std::find(models_.begin(), models_.end(), m) == models_.end()) models_.push_back(m);
+void FixFiberBeam::use_force_model(rod::NodeForceModel *m, bool on) {
+  if (!m) return;
+  const bool present = std::find(models_.begin(), models_.end(), m) != models_.end();
+  if (on && !present) models_.push_back(m);
+  if (!on && present) models_.erase(std::remove(models_.begin(), models_.end(), m), models_.end());
 }
-void FixFiberBeam::remove_force_model(rod::NodeForceModel *m) {
-  models_.erase(std::remove(models_.begin(), models_.end(), m), models_.end());
+void FixFiberBeam::release_force_model(LAMMPS *lmp, rod::NodeForceModel *m) {
+  if (FixFiberBeam *beam = find(lmp)) beam->use_force_model(m, false);
 }
 void FixFiberBeam::remove_from_history(int i, const double *F) {
   if (!implicit_ || i < 0 || i >= atom->nlocal || !is_node(i)) return;

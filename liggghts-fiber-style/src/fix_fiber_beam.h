@@ -107,9 +107,11 @@ class FixFiberBeam : public Fix {
   void remove_from_history(int i, const double F[3]);
   // Implicit scheme only: a force model evaluated inside every fiber's Newton solve at the fiber's
   // end-of-step state (contact with static bodies: fix fiber/yarns `implicit_force newton`). The
-  // registering fix owns the model and removes it before it is destroyed. Idempotent.
-  void add_force_model(fiberform::physics::rod::NodeForceModel *m);
-  void remove_force_model(fiberform::physics::rod::NodeForceModel *m);
+  // registering fix owns the model. use_force_model(m, true) registers m, (m, false) removes it
+  // (idempotent; call it from init); release_force_model removes m from the fix fiber/beam of lmp
+  // if there still is one (call it from the registering fix's destructor).
+  void use_force_model(fiberform::physics::rod::NodeForceModel *m, bool on);
+  static void release_force_model(class LAMMPS *lmp, fiberform::physics::rod::NodeForceModel *m);
   double youngs_modulus() const { return E_; }  // Pa
   double density() const { return rho_; }       // kg/m3
   // Implicit scheme: the internal (elastic) force and torque of local node i at the start of the

@@ -30,10 +30,7 @@ using namespace FixConst;
 namespace phys = fiberform::physics;
 
 
-FixFiberYarns::~FixFiberYarns() {
-  FixFiberBeam *beam = FixFiberBeam::find(lmp);
-  if (beam && model_) beam->remove_force_model(model_.get());
-}
+FixFiberYarns::~FixFiberYarns() { FixFiberBeam::release_force_model(lmp, model_.get()); }
 
 FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
   vector_flag = 1;
@@ -256,12 +253,8 @@ void FixFiberYarns::init() {
   }
   MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, world);
   bodies_.build_bins(glob[0] + law_.h_cut + glob[1]);
-  if (newton_) {
-    if (!model_) model_ = std::make_unique<phys::StaticContactModel>(bodies_, law_, mu_);
-    beam_->add_force_model(model_.get());
-  } else if (model_) {
-    beam_->remove_force_model(model_.get());
-  }
+  if (newton_ && !model_) model_ = std::make_unique<phys::StaticContactModel>(bodies_, law_, mu_);
+  beam_->use_force_model(model_.get(), newton_);
   // the contact force uses the other forces on the node: they must be summed before this fix
   bool after = newton_;  // (not with newton: the contacts act inside the fiber's solve)
   for (int k = 0; k < modify->nfix; ++k) {
@@ -470,7 +463,7 @@ void FixFiberYarns::scan_contacts() {
     if (beam_->node_count(i) > 1) {
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
       const int j = atom->map(atom->tag[i] + 1);
-      if (j < 0) continue;  // beyond the ghost shell: counted by the rank that owns it
+      if (j < 0) continue;  // not present here (fix fiber/beam's ghost cut-off covers an element)
       double rj[4];
       beam_->section_radii(j, rj);
       nh = bodies_.element_hits(xi, {x[j][0], x[j][1], x[j][2]}, std::max(r1, std::max(rj[0], rj[1])),

@@ -52,8 +52,7 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
 }
 
 FixWallFiberDlvo::~FixWallFiberDlvo() {
-  FixFiberBeam *beam = FixFiberBeam::find(lmp);
-  if (beam && model_) beam->remove_force_model(model_.get());
+  FixFiberBeam::release_force_model(lmp, model_.get());
   delete own_engine_;
 }
 
@@ -67,17 +66,13 @@ void FixWallFiberDlvo::init() {
     error->all(FLERR, "fix wall/fiber/dlvo: implicit_force newton with a moving plate is not supported yet (a "
                       "free fiber pushed by the plate leaves it at 1.9x the plate speed; "
                       "docs/models/contact.md section 8): use implicit_force position or impulse");
-  if (newton_) {
-    if (!model_) {
-      bodies_.add_plane(plane0_.point, plane0_.normal, plane0_.velocity);
-      newton_law_ = engine_->cfg.law;
-      newton_law_.steric.s1_damping = true;  // the PD servo, as fix fiber/yarns (docs/models/contact.md 8)
-      model_ = std::make_unique<fiberform::physics::StaticContactModel>(bodies_, newton_law_, 0.0);
-    }
-    beam_->add_force_model(model_.get());
-  } else if (model_) {
-    beam_->remove_force_model(model_.get());
+  if (newton_ && !model_) {
+    bodies_.add_plane(plane0_.point, plane0_.normal, plane0_.velocity);
+    newton_law_ = engine_->cfg.law;
+    newton_law_.steric.s1_damping = true;  // the PD servo, as fix fiber/yarns (docs/models/contact.md 8)
+    model_ = std::make_unique<fiberform::physics::StaticContactModel>(bodies_, newton_law_, 0.0);
   }
+  if (beam_) beam_->use_force_model(model_.get(), newton_);
 }
 
 /* implicit_force newton: the plate's position at the end of this step, where the fibers are solved */

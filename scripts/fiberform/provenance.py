@@ -72,6 +72,22 @@ def file_hash(path: Path) -> str:
     return "sha256:" + h.hexdigest()
 
 
+def machine_info() -> dict[str, object]:
+    """The machine a benchmark ran on: CPU model, cores, Python version, load average at start."""
+    import platform
+
+    model = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": model, "cores": os.cpu_count(), "python": platform.python_version(),
+            "load_average_at_start": os.getloadavg()}
+
+
 def atomic_write_text(path: Path, text: str) -> None:
     """Write ``path`` through ``<path>.in_progress`` and a rename."""
     tmp = in_progress_path(path)

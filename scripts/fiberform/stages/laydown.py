@@ -39,7 +39,7 @@ from ..inputs import (
     STAR, LiggghtsInput, dump_format, file_token, fix_ref, ident_list, quit_if_at_least,
     step_file_token,
 )
-from ..provenance import file_hash, write_dataset
+from ..provenance import atomic_write_text, file_hash, write_dataset
 from ..runner import liggghts_progress, run
 from ..scene import FluidSection, Scene
 from ._stage import Outcome, Stage, StageContext
@@ -56,6 +56,7 @@ INPUT_NAME, LOG_NAME, TRAJ_NAME, YARNS_NAME = "in.laydown", "log.fiberdem", "tra
 _REMOVED = re.compile(r"fix fiber/yarns: step (\d+) removed fiber\(s\)((?: \d+)+)")
 RESTART_STEM, RESTART_EXT = "laydown", "restart"  # restart files laydown.<step>.restart
 _RESTART = re.compile(r"laydown\.(\d+)\.restart")
+_SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
 EARLIER_LOG, RESUME_STATE = "log.earlier", "resume.json"
 
 
@@ -661,18 +662,17 @@ def restart_steps(work: Path) -> list[int]:
     return sorted(out)
 
 
+def dump_snapshots(text: str) -> list[tuple[int, int]]:
+    """(step, offset of its header) of every snapshot in the text of a LIGGGHTS dump file, in file
+    order; a header cut off by a kill (step line incomplete) is not a snapshot."""
+    return [(int(m.group(1)), m.start()) for m in _SNAPSHOT.finditer(text)]
+
+
 def dump_steps(path: Path) -> list[int]:
     """Steps of the snapshots in a LIGGGHTS dump file (in file order)."""
     if not path.is_file():
         return []
-    steps, lines = [], path.read_text(errors="replace").splitlines()
-    for k, line in enumerate(lines[:-1]):
-        if line.startswith("ITEM: TIMESTEP"):
-            try:
-                steps.append(int(lines[k + 1]))
-            except ValueError:
-                break  # a snapshot cut off by the kill
-    return steps
+    return [step for step, _ in dump_snapshots(path.read_text(errors="replace"))]
 
 
 def resume_point(work: Path, hashes: Mapping[str, str]) -> int | None:
@@ -699,13 +699,7 @@ def prepare_resume(work: Path, step: int) -> None:
     writes the snapshot of that step again and everything after it."""
     dump = work / TRAJ_NAME
     text = dump.read_text(errors="replace")
-    starts = [m.start() for m in re.finditer(r"^ITEM: TIMESTEP\n", text, re.M)]
-    keep = len(text)
-    for pos in starts:
-        head = text[pos:pos + 64].split("\n")
-        if len(head) > 1 and head[1].strip().isdigit() and int(head[1]) >= step:
-            keep = pos
-            break
+    keep = next((pos for s, pos in dump_snapshots(text) if s >= step), len(text))
     atomic_write_text(dump, text[:keep])
     # removals up to the restart step are in the restart file's state: keep their log lines
     earlier = work / EARLIER_LOG
@@ -718,12 +712,6 @@ def prepare_resume(work: Path, step: int) -> None:
     for s in restart_steps(work):
         if s > step:
             (work / f"{RESTART_STEM}.{s}.{RESTART_EXT}").unlink()
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 def json_list(items: list[str]) -> str:
