@@ -173,14 +173,16 @@ def test_stock_wall_gran_side_walls_confine_the_fibers(
     assert nearest < 1.5 * r  # a fiber reached a wall (Hertz contact at about one radius) and stayed in
 
 
-def test_fiber_fiber_clearance_closed_form() -> None:
-    """Two crossing fibers (along x at z = 0, along y at z = c), radius r: clearance c - r."""
-    from fiberform.stages.laydown import fiber_fiber_clearance
+def test_fiber_fiber_gap_closed_form() -> None:
+    """Two crossing fibers (along x at z = 0, along y at z = c), node radii r1 and r2: gap
+    c - r1 - r2 (an element takes the larger radius of its nodes)."""
+    from fiberform.stages.laydown import fiber_fiber_gap
 
-    r = 10e-6
+    r1, r2 = 10e-6, 9e-6
+    radius = np.array([r1, r1 - 1e-6, r1 - 2e-6, r2 - 1e-6, r2, r2 - 2e-6])
     for c in (25e-6, 4e-6):
         x = np.array([[-1e-4, 0, 0], [0, 0, 0], [1e-4, 0, 0],
                       [0, -1e-4, c], [0, 0, c], [0, 1e-4, c]])
-        assert fiber_fiber_clearance(x, np.array([0, 3, 6]), r) == pytest.approx(c - r, abs=1e-15)
+        assert fiber_fiber_gap(x, np.array([0, 3, 6]), radius) == pytest.approx(c - r1 - r2, abs=1e-15)
     one = np.array([[0, 0, 0], [1e-4, 0, 0], [2e-4, 0, 0]], dtype=float)
-    assert fiber_fiber_clearance(one, np.array([0, 3]), r) == math.inf  # one fiber: no pair
+    assert fiber_fiber_gap(one, np.array([0, 3]), radius[:3]) == math.inf  # one fiber: no pair

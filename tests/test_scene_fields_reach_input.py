@@ -22,7 +22,7 @@ BASE = {
     "fabric": {"size_x_m": 1.0e-3, "size_y_m": 1.0e-3},
     "flow": {"delta_p_Pa": 100.0, "cell_size_m": 50.0e-6, "height_above_fabric_m": 0.8e-3},
     "laydown": {"max_time_s": 2.0e-3, "check_interval_s": 5.0e-4, "contact_integrator": "substep",
-                "walls": "wall_fiber_dlvo", "yarn_contact": "averaged"},
+                "walls": "wall_fiber_dlvo", "yarn_contact": "averaged", "fiber_contact": "averaged"},
     "contact": {"model": "fiber_dlvo", "integrator": "substep", "terms": ["vdw", "es", "steric"],
                 "hamaker_J": 8.0e-21, "ionic_strength_mol_m3": 1.0, "surface_potential_V": -0.025},
 }
@@ -38,7 +38,7 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "contact_substeps": 37, "inertia_scale": 10.0, "stiffness_scale": 0.5,
         "beam_integrator": "explicit", "rho_inf": 0.8, "newton_tolerance": 1.0e-9,
         "newton_max_iterations": 40, "damping_time_s": 1.0e-6, "yarn_contact": "newton",
-        "restart_interval_s": 1.0e-3, "ranks": 2,
+        "restart_interval_s": 1.0e-3, "ranks": 2, "fiber_contact": "newton",
     },
     "contact": {
         "integrator": "cvode", "terms": ["vdw", "steric"], "hamaker_J": 1.0e-20,

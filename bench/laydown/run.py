@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Lay-down cost on 1 and 2 MPI ranks: wall time per simulated ms, node-steps per second, the
-2-rank speed-up, and the contact state of the sheet (yarn and fiber-fiber clearance).
+2-rank speed-up, and the contact state of the sheet (yarn clearance and fiber-fiber gap).
 
 Pinned inputs: scenes/demo.yaml (20 fibers of 0.8 mm on 1 x 1 mm, implicit real fibers at 1 us)
 run for a fixed simulated time (``--time``, settle check disabled so every run covers the same
@@ -67,7 +67,7 @@ def run_one(name: str, t_end: float, ranks: int, build: Path) -> dict[str, Any]:
             a = dict(h["run"].attrs)
             nodes = int(h["sheet/x"].shape[0])
             fibers = int(h["sheet/fiber_id"].shape[0])
-            ff = float(h["snapshots/min_fiber_fiber_clearance"][...].min())
+            ff = float(h["snapshots/min_fiber_fiber_gap"][...].min())
     steps = int(a["steps"])
     wall = float(a["wall_time_s"])
     return {
@@ -75,7 +75,7 @@ def run_one(name: str, t_end: float, ranks: int, build: Path) -> dict[str, Any]:
         "simulated_ms": steps * 1e-6 * 1e3, "pipeline_wall_s": total, "laydown_wall_s": wall,
         "wall_s_per_simulated_ms": wall / (steps * 1e-3), "node_steps_per_s": nodes * steps / wall,
         "min_element_yarn_clearance_m": float(a["min_element_clearance_m"]),
-        "min_fiber_fiber_clearance_m": ff,
+        "min_fiber_fiber_gap_m": ff,
     }
 
 
@@ -96,7 +96,7 @@ def main() -> int:
                   f"{row['laydown_wall_s']:.1f} s ({row['wall_s_per_simulated_ms']:.1f} s/ms, "
                   f"{row['node_steps_per_s']:.3g} node-steps/s); yarn clearance "
                   f"{row['min_element_yarn_clearance_m'] * 1e6:.2f} um, fiber-fiber "
-                  f"{row['min_fiber_fiber_clearance_m'] * 1e6:.2f} um", flush=True)
+                  f"{row['min_fiber_fiber_gap_m'] * 1e9:.1f} nm", flush=True)
     for name in {r["variant"] for r in rows}:
         by = {r["ranks"]: r for r in rows if r["variant"] == name}
         if 1 in by and 2 in by:

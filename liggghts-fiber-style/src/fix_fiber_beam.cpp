@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <algorithm>
 #include <map>
 #include <sstream>
 #include <vector>
@@ -839,14 +840,16 @@ void FixFiberBeam::implicit_step() {
     if (!(mask[i] & groupbit) || !is_node(i)) continue;
     const int fid = fiber_id(i);
     const int o = fid < static_cast<int>(owner_.size()) ? owner_[fid] : -1;
+    const int c = fid < static_cast<int>(cluster_.size()) ? cluster_[fid] : fid;  // solved with its cluster
+    const int oc = c >= 0 && c < static_cast<int>(owner_.size()) ? owner_[c] : -1;
     if (o < 0) {
       static char buf[256];
       std::snprintf(buf, sizeof buf, "fix fiber/beam: node %d of fiber %d has no owner (node 0 of the fiber is "
                     "missing: fibers must be deleted whole)", atom->tag[i], fid);
       fiberform::fail_one(lmp, FLERR, buf);
     }
-    dest[i] = o;
-    scount_[o] += S_N;
+    dest[i] = oc >= 0 ? oc : o;
+    scount_[dest[i]] += S_N;
   }
   sdispl_.assign(nprocs, 0);
   for (int r = 1; r < nprocs; ++r) sdispl_[r] = sdispl_[r - 1] + scount_[r - 1];
@@ -881,7 +884,7 @@ void FixFiberBeam::implicit_step() {
       b[S_M] = atom->rmass[i];
       b[S_FIXED] = (clamp_groupbit_ && (mask[i] & clamp_groupbit_)) ? 1.0 : 0.0;
       b[S_ACCOK] = p[ACCOK];
-      b[S_SCALE] = std::max(p[A1], p[A2]);
+      b[S_SCALE] = contact_radius(i);
       b[S_HASREF] = p[HASREF];
       b[S_L0] = p[L0];
       b[S_SRC] = comm->me;
@@ -915,66 +918,91 @@ void FixFiberBeam::implicit_step() {
   opt.tau_drag = tau_drag_;
   if (!stepper_) stepper_ = std::make_unique<rod::Stepper>();
   rod::Stepper &stepper = *stepper_;
-  std::vector<rod::Node> nodes;
-  std::vector<rod::Element> elems;
+  std::vector<rod::Node> nodes, fnodes;
+  std::vector<rod::Element> elems, felems;
   std::vector<bm::Vec3> starts;
   // return records, per source rank
   std::vector<std::vector<double>> back(static_cast<size_t>(nprocs));
   energy_local_ = 0;
   dissipation_local_ = 0;
   for (int k = 0; k < 4; ++k) stat_local_[k] = 0;
-  for (auto &kv : fibers) {
-    const std::vector<const double *> &rec = kv.second;
-    const size_t n = rec.size();
-    for (size_t k = 0; k < n; ++k)
-      if (!rec[k]) {
-        static char buf[256];
-        std::snprintf(buf, sizeof buf, "fix fiber/beam: fiber %d: node %d did not reach the fiber's owner rank "
-                      "(fibers must be deleted whole)", kv.first, static_cast<int>(k));
-        fiberform::fail_one(lmp, FLERR, buf);
+  // fibers solved together (contact clusters, set_clusters), each in ascending fiber ID
+  std::map<int, std::vector<int>> clusters;
+  for (const auto &kv : fibers) {
+    const int fid = kv.first;
+    clusters[fid < static_cast<int>(cluster_.size()) && cluster_[fid] >= 0 ? cluster_[fid] : fid].push_back(fid);
+  }
+  std::vector<int> ids, offsets;
+  std::vector<const double *> recs;  // the record of every node of the cluster, in node order
+  for (const auto &cl : clusters) {
+    nodes.clear();
+    elems.clear();
+    ids.clear();
+    offsets.clear();
+    recs.clear();
+    for (const int fid : cl.second) {
+      const std::vector<const double *> &rec = fibers[fid];
+      const size_t n = rec.size();
+      for (size_t k = 0; k < n; ++k)
+        if (!rec[k]) {
+          static char buf[256];
+          std::snprintf(buf, sizeof buf, "fix fiber/beam: fiber %d: node %d did not reach the fiber's owner rank "
+                        "(fibers must be deleted whole)", fid, static_cast<int>(k));
+          fiberform::fail_one(lmp, FLERR, buf);
+        }
+      fnodes.assign(n, rod::Node{});
+      felems.assign(n > 0 ? n - 1 : 0, rod::Element{});
+      bool need_init = false;
+      for (size_t k = 0; k < n; ++k) {
+        const double *b = rec[k];
+        rod::Node &nd = fnodes[k];
+        nd.x = {b[S_X], b[S_X + 1], b[S_X + 2]};
+        if (k > 0) {  // unwrap periodic images: each node next to the previous one
+          double d[3] = {nd.x.x - rec[k - 1][S_X], nd.x.y - rec[k - 1][S_X + 1], nd.x.z - rec[k - 1][S_X + 2]};
+          domain->minimum_image(d);
+          nd.x = fnodes[k - 1].x + bm::Vec3{d[0], d[1], d[2]};
+        }
+        nd.q = {b[S_Q], b[S_Q + 1], b[S_Q + 2], b[S_Q + 3]};
+        nd.v = {b[S_V], b[S_V + 1], b[S_V + 2]};
+        nd.W = {b[S_W], b[S_W + 1], b[S_W + 2]};
+        nd.ax = {b[S_ACC], b[S_ACC + 1], b[S_ACC + 2]};
+        nd.aw = {b[S_ACC + 3], b[S_ACC + 4], b[S_ACC + 5]};
+        nd.vdx = {b[S_ACC + 6], b[S_ACC + 7], b[S_ACC + 8]};
+        nd.vdw = {b[S_ACC + 9], b[S_ACC + 10], b[S_ACC + 11]};
+        nd.m = b[S_M];
+        nd.J = {b[S_J], b[S_J + 1], b[S_J + 2]};
+        nd.F = {b[S_F], b[S_F + 1], b[S_F + 2]};
+        nd.T = {b[S_T], b[S_T + 1], b[S_T + 2]};
+        for (int c = 0; c < 6; ++c) nd.D[c] = b[S_D + c];
+        nd.fixed = b[S_FIXED] > 0.5;
+        nd.scale = b[S_SCALE];
+        nd.radius = b[S_SCALE];
+        if (b[S_ACCOK] < 0.5) need_init = true;
+        if (k + 1 < n) {
+          if (b[S_HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: element without reference");
+          rod::Element &el = felems[k];
+          el.ref.L0 = b[S_L0];
+          el.ref.gamma0 = {b[S_G0], b[S_G0 + 1], b[S_G0 + 2]};
+          el.ref.kappa0 = {b[S_K0], b[S_K0 + 1], b[S_K0 + 2]};
+          el.C.CG = {b[S_CG], b[S_CG + 1], b[S_CG + 2]};
+          el.C.CK = {b[S_CK], b[S_CK + 1], b[S_CK + 2]};
+        }
       }
-    nodes.assign(n, rod::Node{});
-    elems.assign(n > 0 ? n - 1 : 0, rod::Element{});
-    bool need_init = false;
-    for (size_t k = 0; k < n; ++k) {
-      const double *b = rec[k];
-      rod::Node &nd = nodes[k];
-      nd.x = {b[S_X], b[S_X + 1], b[S_X + 2]};
-      if (k > 0) {  // unwrap periodic images: each node next to the previous one
-        double d[3] = {nd.x.x - rec[k - 1][S_X], nd.x.y - rec[k - 1][S_X + 1], nd.x.z - rec[k - 1][S_X + 2]};
-        domain->minimum_image(d);
-        nd.x = nodes[k - 1].x + bm::Vec3{d[0], d[1], d[2]};
-      }
-      nd.q = {b[S_Q], b[S_Q + 1], b[S_Q + 2], b[S_Q + 3]};
-      nd.v = {b[S_V], b[S_V + 1], b[S_V + 2]};
-      nd.W = {b[S_W], b[S_W + 1], b[S_W + 2]};
-      nd.ax = {b[S_ACC], b[S_ACC + 1], b[S_ACC + 2]};
-      nd.aw = {b[S_ACC + 3], b[S_ACC + 4], b[S_ACC + 5]};
-      nd.vdx = {b[S_ACC + 6], b[S_ACC + 7], b[S_ACC + 8]};
-      nd.vdw = {b[S_ACC + 9], b[S_ACC + 10], b[S_ACC + 11]};
-      nd.m = b[S_M];
-      nd.J = {b[S_J], b[S_J + 1], b[S_J + 2]};
-      nd.F = {b[S_F], b[S_F + 1], b[S_F + 2]};
-      nd.T = {b[S_T], b[S_T + 1], b[S_T + 2]};
-      for (int c = 0; c < 6; ++c) nd.D[c] = b[S_D + c];
-      nd.fixed = b[S_FIXED] > 0.5;
-      nd.scale = b[S_SCALE];
-      nd.radius = b[S_SCALE];
-      if (b[S_ACCOK] < 0.5) need_init = true;
-      if (k + 1 < n) {
-        if (b[S_HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: element without reference");
-        rod::Element &el = elems[k];
-        el.ref.L0 = b[S_L0];
-        el.ref.gamma0 = {b[S_G0], b[S_G0 + 1], b[S_G0 + 2]};
-        el.ref.kappa0 = {b[S_K0], b[S_K0 + 1], b[S_K0 + 2]};
-        el.C.CG = {b[S_CG], b[S_CG + 1], b[S_CG + 2]};
-        el.C.CK = {b[S_CK], b[S_CK + 1], b[S_CK + 2]};
-      }
+      // consistent initial accelerations only when the step resolves every mode (physics/implicit_rod.h)
+      if (need_init) stepper.initialise(fnodes, felems, opt, dt < dt_crit_[4]);
+      if (!fnodes.empty()) fnodes.back().next = false;  // the fiber ends here
+      ids.push_back(fid);
+      offsets.push_back(static_cast<int>(nodes.size()));
+      if (!nodes.empty()) elems.emplace_back();  // no element between two fibers
+      nodes.insert(nodes.end(), fnodes.begin(), fnodes.end());
+      elems.insert(elems.end(), felems.begin(), felems.end());
+      recs.insert(recs.end(), rec.begin(), rec.end());
     }
+    offsets.push_back(static_cast<int>(nodes.size()));
+    const size_t n = nodes.size();
     starts.resize(n);
     for (size_t k = 0; k < n; ++k) starts[k] = nodes[k].x;
-    // consistent initial accelerations only when the step resolves every mode (physics/implicit_rod.h)
-    if (need_init) stepper.initialise(nodes, elems, opt, dt < dt_crit_[4]);
+    for (rod::NodeForceModel *m : models_) m->begin_cluster(ids, offsets);
     const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt, &models_);
     if (!st.ok) {
       double amax = 0, vmax = 0;
@@ -984,24 +1012,26 @@ void FixFiberBeam::implicit_step() {
         if (a > amax) amax = a, kmax = static_cast<int>(k);
         vmax = std::max(vmax, bm::norm(nodes[k].v));
       }
+      const size_t f = static_cast<size_t>(std::upper_bound(offsets.begin(), offsets.end(), kmax) - offsets.begin()) - 1;
       static char buf[768];
       std::snprintf(buf, sizeof buf,
-                    "fix fiber/beam: the implicit step of fiber %d did not converge at step %ld, even split "
-                    "into 2^%d sub-steps (newton_tol %g, newton_max %d); largest external force per mass "
-                    "%.3g m/s2 (node %d), largest node speed %.3g m/s. Look for an excessive external force "
-                    "(contact, drag) on this fiber, or reduce the timestep; see docs/styles/fix_fiber_beam.md",
-                    kv.first, static_cast<long>(update->ntimestep), max_split_, newton_tol_, newton_max_, amax,
-                    kmax, vmax);
+                    "fix fiber/beam: the implicit step of fiber %d (solved with %d fiber(s) in contact) did not "
+                    "converge at step %ld, even split into 2^%d sub-steps (newton_tol %g, newton_max %d); largest "
+                    "external force per mass %.3g m/s2 (fiber %d node %d), largest node speed %.3g m/s. Look for an "
+                    "excessive external force (contact, drag) on this fiber, or reduce the timestep; see "
+                    "docs/styles/fix_fiber_beam.md",
+                    ids.front(), static_cast<int>(ids.size()), static_cast<long>(update->ntimestep), max_split_,
+                    newton_tol_, newton_max_, amax, ids[f], kmax - offsets[f], vmax);
       fiberform::fail_one(lmp, FLERR, buf);
     }
     energy_local_ += st.energy;
     dissipation_local_ += st.dissipation;
-    stat_local_[0] += st.iterations;
-    stat_local_[1] += 1;
+    stat_local_[0] += st.iterations * static_cast<double>(ids.size());  // per fiber: each took part in all
+    stat_local_[1] += static_cast<double>(ids.size());
     stat_local_[2] += st.splits;
     stat_local_[3] = std::max(stat_local_[3], static_cast<double>(st.iterations));
     for (size_t k = 0; k < n; ++k) {
-      const double *b = rec[k];
+      const double *b = recs[k];
       const rod::Node &nd = nodes[k];
       std::vector<double> &out = back[static_cast<size_t>(b[S_SRC])];
       const size_t o = out.size();
@@ -1023,6 +1053,7 @@ void FixFiberBeam::implicit_step() {
         for (int c = 0; c < 3; ++c) r[R_ACC + 3 * a + c] = acc[a][c];
     }
   }
+  cluster_.clear();  // set again before every step
   // ---- return the new states
   std::vector<int> bcount(nprocs), bdispl(nprocs, 0), rc(nprocs), rd(nprocs, 0);
   for (int r = 0; r < nprocs; ++r) bcount[r] = static_cast<int>(back[r].size());

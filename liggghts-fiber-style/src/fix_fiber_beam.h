@@ -79,6 +79,9 @@ class FixFiberBeam : public Fix {
   void frame(int i, double t1[3], double t2[3], double t3[3]) const;
   // outer and inner semi-axes a1, a2, b1, b2 of the node's section, m
   void section_radii(int i, double r[4]) const;
+  // radius of the circle that stands for the section in contacts inside the Newton solve (m): the
+  // larger outer half-axis
+  double contact_radius(int i) const { return node_[i][A1] > node_[i][A2] ? node_[i][A1] : node_[i][A2]; }
   // the first fix fiber/beam defined in this LAMMPS instance, or nullptr
   static FixFiberBeam *find(class LAMMPS *lmp);
   // true if this fix comes before `other` in the fix list (its hooks run first)
@@ -111,6 +114,10 @@ class FixFiberBeam : public Fix {
   // (idempotent; call it from init); release_force_model removes m from the fix fiber/beam of lmp
   // if there still is one (call it from the registering fix's destructor).
   void use_force_model(fiberform::physics::rod::NodeForceModel *m, bool on);
+  // Implicit scheme only, for the next step: fibers solved together (contact clusters of pair_style
+  // fiber/dlvo `implicit_force newton`): cluster[id] is the smallest fiber ID of fiber id's cluster
+  // (the same on every rank). Empty: every fiber alone. Cleared after every step.
+  void set_clusters(std::vector<int> cluster) { cluster_ = std::move(cluster); }
   static void release_force_model(class LAMMPS *lmp, fiberform::physics::rod::NodeForceModel *m);
   double youngs_modulus() const { return E_; }  // Pa
   double density() const { return rho_; }       // kg/m3
@@ -163,6 +170,7 @@ class FixFiberBeam : public Fix {
   std::unique_ptr<fiberform::physics::rod::Stepper> stepper_;  // implicit solver workspace
   std::vector<fiberform::physics::rod::NodeForceModel *> models_;  // not owned
   std::vector<int> owner_;            // owner rank of fiber ID (index), -1 if absent
+  std::vector<int> cluster_;          // set_clusters: smallest fiber ID of each fiber's cluster
   bool owners_valid_ = false;
   std::vector<double> sendbuf_, recvbuf_;
   std::vector<int> scount_, rcount_, sdispl_, rdispl_;

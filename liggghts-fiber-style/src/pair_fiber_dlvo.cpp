@@ -56,9 +56,6 @@ void PairFiberDlvo::settings(int narg, char **arg) {
     iarg += used;
   }
   fiberform::validate_contact_config(lmp, "pair_style fiber/dlvo", cfg);
-  if (cfg.implicit_newton)
-    error->all(FLERR, "pair_style fiber/dlvo: implicit_force newton is for static bodies (fix wall/fiber/dlvo, "
-                      "fix fiber/yarns); fiber pairs take position or impulse");
   engine_->cfg = cfg;
   // the internal step fix exists from here on (so that thermo can name f_FIBER_DLVO_STEP[i])
   if (modify->find_fix(kStepFixId) < 0) {
@@ -103,6 +100,7 @@ void PairFiberDlvo::compute(int eflag, int vflag) {
   if (eflag || vflag) ev_setup(eflag, vflag);
   else evflag = vflag_fdotr = 0;
   if (engine_->cfg.integrator != fiberform::IntegratorKind::None) return;  // the step fix applies them
+  if (engine_->cfg.implicit_newton) return;  // inside the fibers' Newton solves (fix fiber/dlvo/step)
   // instantaneous forces (the classic explicit way); ghost contributions are summed by LIGGGHTS'
   // reverse communication (newton on)
   double **t = atom->torque_flag ? atom->torque : nullptr;

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "check.h"
+#include "rod_fixtures.h"
 #include "physics/static_bodies.h"
 
 using namespace fiberform::physics;
@@ -44,39 +45,8 @@ void test_geometry() {
   expect(std::fabs(b.plane_gap(0, {5, 5, 2e-4}, r) - (3e-4 - r)) < 1e-15, "plane gap");
 }
 
-struct Fiber {
-  std::vector<rod::Node> nodes;
-  std::vector<rod::Element> els;
-  double mass = 0;
-};
-
-// straight fiber along x centred at (0, 0, z), hollow circular section r_out/r_in, real stiffness
-Fiber make_fiber(int ne, double L, double r_out, double r_in, double z) {
-  const double E = 10e9, G = 4e9, rho = 1500, ks = 5.0 / 6.0;
-  const beam::Section s = beam::hollow_ellipse(r_out, r_out, r_in, r_in);
-  const beam::Stiffness C = beam::section_stiffness(s, E, G, ks);
-  Fiber f;
-  f.nodes.resize(ne + 1);
-  f.els.resize(ne);
-  const double le = L / ne;
-  for (int k = 0; k <= ne; ++k) {
-    rod::Node &nd = f.nodes[k];
-    const double w = (k == 0 || k == ne) ? 0.5 : 1.0;
-    nd.m = rho * s.A * le * w;
-    nd.J = {rho * le * w * s.I1, rho * le * w * s.I2, rho * le * w * s.Ip};
-    nd.x = {-0.5 * L + k * le, 0, z};
-    // frame: t3 along x
-    nd.q = beam::qexp({0, 0.5 * beam::kPi, 0});
-    nd.scale = r_out;
-    nd.radius = r_out;
-    f.mass += nd.m;
-  }
-  for (int k = 0; k < ne; ++k) {
-    f.els[k].ref = beam::element_reference(f.nodes[k].x, f.nodes[k].q, f.nodes[k + 1].x, f.nodes[k + 1].q);
-    f.els[k].C = C;
-  }
-  return f;
-}
+using fiberform::testing::Fiber;
+using fiberform::testing::make_fiber;
 
 // A fiber of radius r across two parallel yarns (along y at x = +-d, radius R), released 200 nm above
 // them at 50 mm/s with a load of 2000 m/s^2 per mass (the drag of the lay-down's flow on such
@@ -86,7 +56,7 @@ void test_drop_on_yarns(double h, double r) {
   StaticBodies b;
   for (double x : {-d, d}) b.add_segment({x, -1e-3, 0}, {x, 1e-3, 0}, R, x < 0 ? 0 : 1);
   const int ne = 12;
-  Fiber f = make_fiber(ne, L, r, 0.6 * r, R + r + 200e-9);
+  Fiber f = make_fiber(ne, L, r, 0.6 * r, Vec3{0, 0, R + r + 200e-9});
   b.build_bins(r + 50e-9 + 2 * L / ne);
   ContactLaw law;  // vdW + electrostatics + steric, cellulose in 1 mM water (contact_law.h)
   law.steric.s1_damping = true;  // as fix fiber/yarns with implicit_force newton
@@ -152,7 +122,7 @@ void test_friction(double at_over_an) {
   const double r = 10e-6, L = 0.4e-3, an = 2000.0, mu = 0.5, h = 1e-5;
   StaticBodies b;
   b.add_plane({0, 0, 0}, {0, 0, 1});
-  Fiber f = make_fiber(8, L, r, 0.6 * r, r + 0.4e-9);
+  Fiber f = make_fiber(8, L, r, 0.6 * r, Vec3{0, 0, r + 0.4e-9});
   ContactLaw law;
   StaticContactModel model(b, law, mu);
   std::vector<rod::NodeForceModel *> models{&model};

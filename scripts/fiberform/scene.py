@@ -687,6 +687,14 @@ class LaydownSection(_Section):
         "Absent: newton with beam_integrator implicit, averaged with explicit",
         default=None,
     )
+    fiber_contact: Literal["newton", "averaged"] | None = choice(
+        "How fibers act on each other (contact section, pair_style fiber/dlvo): newton (fibers "
+        "that may touch during a step are solved together in one Newton solve with the law inside; "
+        "docs/models/contact.md section 9) or averaged (each contact point pair sub-integrated with "
+        "contact.integrator, the averaged force handed to each fiber's step). Absent: newton with "
+        "beam_integrator implicit, averaged with explicit",
+        default=None,
+    )
     inertia_scale: float = quantity(
         "fix fiber/beam inertia_scale (rotary inertia factor; speed option, 1 = real inertia)", "1",
         default=1.0, gt=0.0, le=1e8,
@@ -739,12 +747,22 @@ class LaydownSection(_Section):
         if self.yarn_contact == "newton" and self.beam_integrator == "explicit":
             raise scene_problem("yarn_contact", "newton needs beam_integrator implicit (allowed "
                                 "with explicit: averaged)", self.yarn_contact)
+        if self.fiber_contact == "newton" and self.beam_integrator == "explicit":
+            raise scene_problem("fiber_contact", "newton needs beam_integrator implicit (allowed "
+                                "with explicit: averaged)", self.fiber_contact)
         if (self.yarn_contact_mode == "newton" and self.walls != "wall_fiber_dlvo"
                 and "contact_integrator" in self.model_fields_set):
             raise scene_problem("contact_integrator", "only used with yarn_contact averaged or "
                                 "walls wall_fiber_dlvo (yarn_contact newton solves the contacts "
                                 "inside the fiber step)", self.contact_integrator)
         return self
+
+    @property
+    def fiber_contact_mode(self) -> str:
+        """fiber_contact with its default resolved: newton (implicit) or averaged (explicit)."""
+        if self.fiber_contact is not None:
+            return self.fiber_contact
+        return "newton" if self.beam_integrator == "implicit" else "averaged"
 
     @property
     def yarn_contact_mode(self) -> str:

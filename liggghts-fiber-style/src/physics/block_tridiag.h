@@ -24,15 +24,16 @@ namespace fiberform::physics::blocktri {
 constexpr int kB = 6;       // block size
 constexpr int kBB = kB * kB;
 
-// In-place LU with partial pivoting of a 6 x 6 row-major matrix; piv receives the row order.
-// Returns false if a pivot is zero or not finite.
-inline bool lu6(double *a, int *piv) {
-  for (int i = 0; i < kB; ++i) piv[i] = i;
-  for (int c = 0; c < kB; ++c) {
+// In-place LU with partial pivoting of an n x n row-major matrix; piv receives the row order.
+// Returns false if a pivot is zero or not finite. (Also the dense capacitance solve of the
+// Woodbury couplings in physics/implicit_rod.h.)
+inline bool lu_factor(int n, double *a, int *piv) {
+  for (int i = 0; i < n; ++i) piv[i] = i;
+  for (int c = 0; c < n; ++c) {
     int p = c;
-    double best = std::fabs(a[c * kB + c]);
-    for (int r = c + 1; r < kB; ++r) {
-      const double v = std::fabs(a[r * kB + c]);
+    double best = std::fabs(a[c * n + c]);
+    for (int r = c + 1; r < n; ++r) {
+      const double v = std::fabs(a[r * n + c]);
       if (v > best) {
         best = v;
         p = r;
@@ -40,36 +41,43 @@ inline bool lu6(double *a, int *piv) {
     }
     if (!(best > 0.0) || !std::isfinite(best)) return false;
     if (p != c) {
-      for (int k = 0; k < kB; ++k) {
-        const double t = a[c * kB + k];
-        a[c * kB + k] = a[p * kB + k];
-        a[p * kB + k] = t;
+      for (int k = 0; k < n; ++k) {
+        const double t = a[c * n + k];
+        a[c * n + k] = a[p * n + k];
+        a[p * n + k] = t;
       }
       const int t = piv[c];
       piv[c] = piv[p];
       piv[p] = t;
     }
-    const double inv = 1.0 / a[c * kB + c];
-    for (int r = c + 1; r < kB; ++r) {
-      const double l = a[r * kB + c] * inv;
-      a[r * kB + c] = l;
+    const double inv = 1.0 / a[c * n + c];
+    for (int r = c + 1; r < n; ++r) {
+      const double l = a[r * n + c] * inv;
+      a[r * n + c] = l;
       if (l != 0.0)
-        for (int k = c + 1; k < kB; ++k) a[r * kB + k] -= l * a[c * kB + k];
+        for (int k = c + 1; k < n; ++k) a[r * n + k] -= l * a[c * n + k];
     }
   }
   return true;
 }
 
+// Solves (LU) y = b for one right-hand side (n values in b, the solution in y; y != b).
+inline void lu_solve(int n, const double *lu, const int *piv, const double *b, double *y) {
+  for (int i = 0; i < n; ++i) y[i] = b[piv[i]];
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < i; ++k) y[i] -= lu[i * n + k] * y[k];
+  for (int i = n - 1; i >= 0; --i) {
+    for (int k = i + 1; k < n; ++k) y[i] -= lu[i * n + k] * y[k];
+    y[i] /= lu[i * n + i];
+  }
+}
+
+inline bool lu6(double *a, int *piv) { return lu_factor(kB, a, piv); }
+
 // Solves (LU) x = b for one right-hand side (b overwritten by x).
 inline void lu6_solve(const double *lu, const int *piv, double *b) {
   double y[kB];
-  for (int i = 0; i < kB; ++i) y[i] = b[piv[i]];
-  for (int i = 0; i < kB; ++i)
-    for (int k = 0; k < i; ++k) y[i] -= lu[i * kB + k] * y[k];
-  for (int i = kB - 1; i >= 0; --i) {
-    for (int k = i + 1; k < kB; ++k) y[i] -= lu[i * kB + k] * y[k];
-    y[i] /= lu[i * kB + i];
-  }
+  lu_solve(kB, lu, piv, b, y);
   for (int i = 0; i < kB; ++i) b[i] = y[i];
 }
 

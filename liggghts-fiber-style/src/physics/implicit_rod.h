@@ -86,6 +86,8 @@ struct Node {
   double scale = 1e-5;               // length scale of the convergence test (m): the section radius
   bool fixed = false;                // clamped: position and frame held
   double radius = 0;                 // section radius seen by the force models (m)
+  bool next = true;  // an element joins this node to the next one in the vector; false at the last
+                     // node of a fiber when several fibers are solved together (a contact cluster)
   // outputs (end of step)
   Vec3 Fint, Tint;  // internal (elastic + material damping) force and torque, spatial
   Vec3 Fmodel;      // force of the NodeForceModels at the end of the step (N), spatial
@@ -95,8 +97,21 @@ struct Node {
 // (3 x 3 blocks, row-major): d = (k, k), l = (k, k-1), u = (k, k+1).
 struct ForceJacobian {
   std::vector<double> Kd, Kl, Ku, Cd, Cl, Cu;  // dF/dx (N/m), dF/dv (N s/m)
+  // A force f(h, u) n between two points p = sum_i w_i x_i (i < 4 nodes, weights of both sides with
+  // the sign of their side: + on the side the normal points to), gap h = n.p + const, rate u = n.dp/dt:
+  // its derivatives are the rank-one terms dF_i/dx_j = w_i w_j dFdh n n^T, dF_i/dv_j = w_i w_j dFdu n n^T
+  // for all i, j, also between nodes that are not neighbours (contact between two fibers of a
+  // cluster). The Stepper solves with them by the Woodbury identity.
+  struct Coupling {
+    int node[4];
+    double w[4];
+    Vec3 n;
+    double dFdh, dFdu;
+  };
+  std::vector<Coupling> couplings;
   void reset(std::size_t n) {
     for (std::vector<double> *v : {&Kd, &Kl, &Ku, &Cd, &Cl, &Cu}) v->assign(9 * n, 0.0);
+    couplings.clear();
   }
   // adds w K (dF_row/dx_col) and w C (dF_row/dv_col); col must be row or a neighbour
   void add(std::size_t row, std::size_t col, double w, const double K[9], const double C[9]) {
@@ -115,8 +130,21 @@ struct ForceJacobian {
 class NodeForceModel {
  public:
   virtual ~NodeForceModel() = default;
-  // called at the start of every attempt of a (sub-)step of length h (s)
-  virtual void begin_step(double h) { (void)h; }
+  // called before the steps of one fiber (its id in the simulation; -1 when there is none)
+  virtual void begin_fiber(int fiber) { (void)fiber; }
+  // called before the steps of several fibers solved together (a contact cluster): their ids and
+  // the index of each one's first node in the node vector (offsets.size() = fibers.size() + 1)
+  virtual void begin_cluster(const std::vector<int> &fibers, const std::vector<int> &offsets) {
+    (void)fibers;
+    (void)offsets;
+  }
+  // called at the start of every attempt of a (sub-)step of length h (s) that begins t0 (s) after
+  // the start of the whole step, with the nodes' state at the start of the sub-step
+  virtual void begin_step(const std::vector<Node> &start, double t0, double h) {
+    (void)start;
+    (void)t0;
+    (void)h;
+  }
   // adds the forces at the nodes' current state to F (N); if J: their derivatives too
   virtual void evaluate(const std::vector<Node> &nodes, std::vector<Vec3> &F, ForceJacobian *J) = 0;
   // largest fraction in (0, 1] of the translational correction dx (m, per node) the model accepts
@@ -164,6 +192,7 @@ class Stepper {
   static constexpr double kMaxStepTurn = 1.0;  // rad: largest rotation of a node in one step
   static constexpr int kRefresh = 4;           // iterations on one tangent before it is formed again
   static constexpr double kContraction = 0.25; // a correction larger than this x the previous one: new tangent
+  static constexpr int kMaxBacktracks = 12;    // halvings of one correction whose residual grew
   // Start of the integration. consistent = true: initial accelerations from all forces,
   // vdot = (F_int + F)/m, J Wdot = R^T (T_int + T) - W x J W, a = vdot (exact start; use it when
   // the step resolves every mode of the fiber). consistent = false: from the EXTERNAL loads only.
@@ -197,7 +226,7 @@ class Stepper {
     models_ = models;
     Stats st;
     saved_ = nodes;
-    st.ok = advance(nodes, elems, h, g, opt, 0, st);
+    st.ok = advance(nodes, elems, 0.0, h, g, opt, 0, st);
     if (!st.ok) nodes = saved_;
     return st;
   }
@@ -207,6 +236,7 @@ class Stepper {
                               Stats *st) {
     for (Node &nd : nodes) nd.Fint = nd.Tint = Vec3{};
     for (std::size_t e = 0; e < elems.size(); ++e) {
+      if (!nodes[e].next) continue;
       Node &A = nodes[e], &B = nodes[e + 1];
       const beam::ElementForces f =
           beam::element_forces(state(A), state(B), elems[e].ref, elems[e].C, opt.t_damp);
@@ -294,6 +324,16 @@ class Stepper {
     }
   }
 
+  // a Newton correction dx (m), dth (rad, body) of node k: increments and the scheme's relations
+  void correct(Node &nd, std::size_t k, Vec3 dx, Vec3 dth, double h, double gp, double bp) {
+    dQx_[k] = dQx_[k] + (1.0 / h) * dx;
+    dQw_[k] = dQw_[k] + (1.0 / h) * dth;
+    nd.v = nd.v + gp * dx;
+    nd.W = nd.W + gp * dth;
+    nd.vdx = nd.vdx + bp * dx;
+    nd.vdw = nd.vdw + bp * dth;
+  }
+
   void set_positions(std::vector<Node> &nodes, const std::vector<Node> &start, double h) {
     for (std::size_t k = 0; k < nodes.size(); ++k) {
       if (nodes[k].fixed) continue;
@@ -302,29 +342,31 @@ class Stepper {
     }
   }
 
-  bool advance(std::vector<Node> &nodes, const std::vector<Element> &elems, double h, const GenAlpha &g,
-               const Options &opt, int depth, Stats &st) {
+  bool advance(std::vector<Node> &nodes, const std::vector<Element> &elems, double t0, double h,
+               const GenAlpha &g, const Options &opt, int depth, Stats &st) {
     st.depth = std::max(st.depth, depth);
     const std::vector<Node> start = nodes;
-    if (attempt(nodes, start, elems, h, g, opt, st)) return true;
+    if (attempt(nodes, start, elems, t0, h, g, opt, st)) return true;
     if (depth >= opt.max_split) return false;
     nodes = start;
     ++st.splits;
-    if (!advance(nodes, elems, 0.5 * h, g, opt, depth + 1, st)) return false;
-    return advance(nodes, elems, 0.5 * h, g, opt, depth + 1, st);
+    if (!advance(nodes, elems, t0, 0.5 * h, g, opt, depth + 1, st)) return false;
+    return advance(nodes, elems, t0 + 0.5 * h, 0.5 * h, g, opt, depth + 1, st);
   }
 
   bool attempt(std::vector<Node> &nodes, const std::vector<Node> &start, const std::vector<Element> &elems,
-               double h, const GenAlpha &g, const Options &opt, Stats &st) {
+               double t0, double h, const GenAlpha &g, const Options &opt, Stats &st) {
     const std::size_t n = nodes.size();
     const double bp = (1.0 - g.am) / (h * h * g.beta * (1.0 - g.af));
     const double gp = g.gamma / (h * g.beta);
     const double inv_tau = opt.tau_drag > 0 ? 1.0 / opt.tau_drag : 0.0;
     const bool have_models = models_ && !models_->empty();
     if (have_models)
-      for (NodeForceModel *m : *models_) m->begin_step(h);
+      for (NodeForceModel *m : *models_) m->begin_step(start, t0, h);
     dQx_.assign(n, Vec3{});
     dQw_.assign(n, Vec3{});
+    lastdx_.assign(n, Vec3{});
+    lastdth_.assign(n, Vec3{});
     // predictor: the nodes stay where they are (dQ = 0), the other quantities from the scheme's
     // relations. (Extrapolating the acceleration or the velocity instead can rotate a node of tiny
     // rotary inertia by more than pi in one large step: the exponential map then aliases and Newton
@@ -356,6 +398,9 @@ class Stepper {
     int since_tangent = 0;
     bool slow = false;         // the last correction did not shrink fast enough: form a new tangent
     double prev_err = INFINITY;
+    double last_rn = INFINITY;  // scaled residual norm at the last accepted iterate
+    bool fresh = false;         // the last correction was solved with a tangent formed for it
+    int backtracks = 0;
     for (int it = 0; it < opt.max_iter; ++it) {
       ++st.iterations;
       // modified Newton: the tangent is formed and factored at the first iteration and again
@@ -371,6 +416,7 @@ class Stepper {
       std::fill(rhs_.begin(), rhs_.end(), 0.0);
       // internal forces (and their tangent)
       for (std::size_t e = 0; e + 1 < n; ++e) {
+        if (!nodes[e].next) continue;  // the last node of a fiber in a cluster
         const beam::NodeState A = state(nodes[e]), B = state(nodes[e + 1]);
         element_residual(A, B, elems[e], opt.t_damp, re);
         for (int r = 0; r < 6; ++r) {
@@ -394,8 +440,8 @@ class Stepper {
       }
       // forces of the models at the current iterate (and their tangent)
       Fc_.assign(n, Vec3{});
+      if (tangent) jac_.reset(n);
       if (have_models) {
-        if (tangent) jac_.reset(n);
         for (NodeForceModel *m : *models_) m->evaluate(nodes, Fc_, tangent ? &jac_ : nullptr);
       }
       // inertia, external forces, drag
@@ -451,6 +497,29 @@ class Stepper {
             if (k + 1 < n) Uk[i * 6 + j] -= jac_.Ku[q] + gp * jac_.Cu[q];
           }
       }
+      // Backtracking (with force models only): a correction that made the residual grow (it stepped
+      // across a kink of a contact law, e.g. the clip of the steric servo, and Newton would cycle
+      // between both sides) is halved and the residual evaluated again. Norm: the residual scaled as
+      // the system.
+      {
+        double rn = 0.0;
+        for (std::size_t q = 0; q < n * 6; ++q) rn += rhs_[q] * rhs_[q] * scale_[q] * scale_[q];
+        if (have_models && fresh && it > 0 && rn > last_rn * (1.0 + 1e-9) && backtracks < kMaxBacktracks &&
+            std::isfinite(last_rn)) {
+          ++backtracks;
+          for (std::size_t k = 0; k < n; ++k) {
+            if (nodes[k].fixed) continue;
+            lastdx_[k] = 0.5 * lastdx_[k];
+            lastdth_[k] = 0.5 * lastdth_[k];
+            correct(nodes[k], k, -1.0 * lastdx_[k], -1.0 * lastdth_[k], h, gp, bp);
+          }
+          set_positions(nodes, start, h);
+          slow = true;  // a new tangent at the shortened iterate
+          continue;
+        }
+        backtracks = 0;
+        last_rn = rn;
+      }
       if (tangent) {
         // symmetric diagonal scaling, then the block factorisation
         for (std::size_t k = 0; k < n; ++k)
@@ -470,10 +539,12 @@ class Stepper {
             }
         }
         if (!blocktri::factor(static_cast<int>(n), Dm_.data(), Lm_.data(), Um_.data(), piv_.data())) return false;
+        if (!build_couplings(nodes, gp)) return false;
       }
       // solve S d = -r with the (possibly older) factors
       for (std::size_t q = 0; q < n * 6; ++q) rhs_[q] *= -scale_[q];
       blocktri::solve_factored(static_cast<int>(n), Dm_.data(), Lm_.data(), Um_.data(), piv_.data(), rhs_.data());
+      apply_couplings();
       // update; a correction that would rotate a node by more than kMaxTurn is shortened (damped
       // Newton), and a step that turns a node by more than kMaxStepTurn fails (and is split)
       double err = 0.0, turn = 0.0;
@@ -505,17 +576,17 @@ class Stepper {
         }
         if (!std::isfinite(dx.x + dx.y + dx.z + dth.x + dth.y + dth.z)) return false;
         err = std::max(err, std::max(beam::norm(dx) / nd.scale, beam::norm(dth)));
-        dQx_[k] = dQx_[k] + (1.0 / h) * dx;
-        dQw_[k] = dQw_[k] + (1.0 / h) * dth;
-        nd.v = nd.v + gp * dx;
-        nd.W = nd.W + gp * dth;
-        nd.vdx = nd.vdx + bp * dx;
-        nd.vdw = nd.vdw + bp * dth;
+        lastdx_[k] = dx;
+        lastdth_[k] = dth;
+        correct(nd, k, dx, dth, h, gp, bp);
       }
       set_positions(nodes, start, h);
-      slow = !(err <= kContraction * prev_err);
-      prev_err = err;
-      if (damp < 1.0 || !(err <= opt.tol)) continue;
+      // the size of the full (undamped) correction measures convergence
+      const double full = damp > 0.0 ? err / damp : err;
+      slow = !(full <= kContraction * prev_err);
+      prev_err = full;
+      fresh = tangent;
+      if (!(full <= opt.tol)) continue;
       for (std::size_t k = 0; k < n; ++k)
         if (h * beam::norm(dQw_[k]) > kMaxStepTurn) return false;
       // converged: end-of-step outputs and pseudo-accelerations
@@ -539,11 +610,117 @@ class Stepper {
     return false;
   }
 
+  // ---- rank-one couplings (ForceJacobian::Coupling) by the Woodbury identity. The iteration matrix is
+  // S = T + sum_c kappa_c g_c g_c^T, T block tridiagonal (factored; block diagonal over the fibers of
+  // a cluster), g_c the coupling's node weights times its normal, kappa_c = -(dF/dh + gp dF/du) > 0.
+  // S^-1 r = y - Z (K^-1 + G^T Z)^-1 G^T y with y = T^-1 r, Z = T^-1 G: one solve per coupling over
+  // the fibers it touches, and a dense LU of the (couplings x couplings) capacitance matrix.
+  // Terms with kappa <= 0 (attraction) are left out of the iteration matrix (modified Newton).
+  struct WCol {
+    int node[4];
+    double u[12];     // scaled g_c at the translational dofs of its nodes
+    int lo[4], hi[4]; // node ranges (fibers) Z is computed on
+    int nr = 0;
+    std::vector<double> z;  // T^-1 g_c on those ranges, 6 values per node
+    double zval(int k, int d) const {
+      int off = 0;
+      for (int r = 0; r < nr; ++r) {
+        if (k >= lo[r] && k < hi[r]) return z[static_cast<std::size_t>(6 * (off + k - lo[r]) + d)];
+        off += hi[r] - lo[r];
+      }
+      return 0.0;
+    }
+  };
+
+  bool build_couplings(const std::vector<Node> &nodes, double gp) {
+    wcols_.clear();
+    if (jac_.couplings.empty()) return true;
+    const int n = static_cast<int>(nodes.size());
+    // fiber ranges
+    flo_.assign(static_cast<std::size_t>(n), 0);
+    fhi_.assign(static_cast<std::size_t>(n), n);
+    for (int k = 0, lo = 0; k < n; ++k) {
+      flo_[k] = lo;
+      if (!nodes[k].next || k + 1 == n) {
+        for (int j = lo; j <= k; ++j) fhi_[j] = k + 1;
+        lo = k + 1;
+      }
+    }
+    std::vector<double> kinv;
+    for (const ForceJacobian::Coupling &c : jac_.couplings) {
+      const double kappa = -(c.dFdh + gp * c.dFdu);
+      if (!(kappa > 0.0) || !std::isfinite(kappa)) continue;
+      WCol w;
+      for (int i = 0; i < 4; ++i) {
+        w.node[i] = c.node[i];
+        for (int d = 0; d < 3; ++d)
+          w.u[3 * i + d] = nodes[c.node[i]].fixed ? 0.0 : scale_[6 * c.node[i] + d] * c.w[i] * c.n[d];
+        bool have = false;
+        for (int r = 0; r < w.nr; ++r) have = have || w.lo[r] == flo_[c.node[i]];
+        if (!have) {
+          w.lo[w.nr] = flo_[c.node[i]];
+          w.hi[w.nr] = fhi_[c.node[i]];
+          ++w.nr;
+        }
+      }
+      for (int r = 0; r < w.nr; ++r) {
+        const std::size_t off = w.z.size();
+        w.z.resize(off + 6 * static_cast<std::size_t>(w.hi[r] - w.lo[r]), 0.0);
+        for (int i = 0; i < 4; ++i)
+          if (w.node[i] >= w.lo[r] && w.node[i] < w.hi[r])
+            for (int d = 0; d < 3; ++d) w.z[off + 6 * (w.node[i] - w.lo[r]) + d] += w.u[3 * i + d];
+        const std::size_t lo = static_cast<std::size_t>(w.lo[r]);
+        blocktri::solve_factored(w.hi[r] - w.lo[r], &Dm_[36 * lo], &Lm_[36 * lo], &Um_[36 * lo], &piv_[6 * lo],
+                                 &w.z[off]);
+      }
+      wcols_.push_back(std::move(w));
+      kinv.push_back(1.0 / kappa);
+    }
+    const std::size_t m = wcols_.size();
+    cap_.assign(m * m, 0.0);
+    for (std::size_t a = 0; a < m; ++a) {
+      cap_[a * m + a] = kinv[a];
+      for (std::size_t b = 0; b < m; ++b) {
+        double v = 0.0;
+        for (int i = 0; i < 4; ++i)
+          for (int d = 0; d < 3; ++d) v += wcols_[a].u[3 * i + d] * wcols_[b].zval(wcols_[a].node[i], d);
+        cap_[a * m + b] += v;
+      }
+    }
+    cpiv_.resize(m);
+    return blocktri::lu_factor(static_cast<int>(m), cap_.data(), cpiv_.data());
+  }
+
+  void apply_couplings() {
+    const std::size_t m = wcols_.size();
+    if (m == 0) return;
+    tw_.assign(m, 0.0);
+    for (std::size_t a = 0; a < m; ++a)
+      for (int i = 0; i < 4; ++i)
+        for (int d = 0; d < 3; ++d) tw_[a] += wcols_[a].u[3 * i + d] * rhs_[6 * wcols_[a].node[i] + d];
+    ty_.resize(m);
+    blocktri::lu_solve(static_cast<int>(m), cap_.data(), cpiv_.data(), tw_.data(), ty_.data());
+    for (std::size_t b = 0; b < m; ++b) {
+      const WCol &w = wcols_[b];
+      std::size_t off = 0;
+      for (int r = 0; r < w.nr; ++r) {
+        const std::size_t len = 6 * static_cast<std::size_t>(w.hi[r] - w.lo[r]);
+        double *y = &rhs_[6 * static_cast<std::size_t>(w.lo[r])];
+        for (std::size_t q = 0; q < len; ++q) y[q] -= w.z[off + q] * ty_[b];
+        off += len;
+      }
+    }
+  }
+
+  std::vector<WCol> wcols_;
+  std::vector<double> cap_, tw_, ty_;
+  std::vector<int> cpiv_, flo_, fhi_;
+
   std::vector<Node> saved_;
   const std::vector<NodeForceModel *> *models_ = nullptr;
   ForceJacobian jac_;
   std::vector<Vec3> Fc_, dxs_;
-  std::vector<Vec3> dQx_, dQw_;
+  std::vector<Vec3> dQx_, dQw_, lastdx_, lastdth_;
   std::vector<double> Dm_, Lm_, Um_, rhs_, scale_;
   std::vector<int> piv_;
 };

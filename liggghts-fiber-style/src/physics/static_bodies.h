@@ -49,6 +49,8 @@ struct BodyHit {
   double h = 0.0;
   double r2 = 0.0;
   Vec3 vb;  // velocity of the body (m/s): a moving plate; 0 for yarns
+  int seg = -1;     // segment of the body (element_segment_hits)
+  double t = 0.0;   // parameter of the contact point on that segment
 };
 
 class StaticBodies {
@@ -65,6 +67,11 @@ class StaticBodies {
                 // the fibers are solved for (the end of the step)
   };
 
+  void clear_segments() {
+    segs_.clear();
+    bins_.clear();
+    bins_valid_ = false;
+  }
   void add_segment(Vec3 a, Vec3 b, double radius, int yarn) {
     Segment s;
     s.a = a;
@@ -122,14 +129,24 @@ class StaticBodies {
   // Yarns near element xa-xb of radius r: per yarn the closest segment, when h < margin.
   // The element must be shorter than reach() - r - margin for the lookup at its midpoint to be complete.
   int element_hits(Vec3 xa, Vec3 xb, double r, double margin, BodyHit out[kMaxHits]) const {
-    const Vec3 mid = 0.5 * (xa + xb);
-    const std::vector<int> *cand = lookup(mid);
-    if (!cand) return 0;
-    const double half_e = 0.5 * norm(xb - xa);
+    scratch_.clear();
+    element_segment_hits(xa, xb, r, margin, -1, scratch_);
     int yarn[kMaxHits];
     int nhit = 0;
+    for (const BodyHit &g : scratch_) insert(out, yarn, nhit, segs_[static_cast<std::size_t>(g.seg)].yarn, g.s, g.n, g.h, g.r2);
+    return nhit;
+  }
+  // Every segment near element xa-xb of radius r (h < margin), except those of body `skip`, with the
+  // segment id and the parameter t of the contact point on it; appended to out. Same completeness
+  // condition as element_hits.
+  void element_segment_hits(Vec3 xa, Vec3 xb, double r, double margin, int skip, std::vector<BodyHit> &out) const {
+    const Vec3 mid = 0.5 * (xa + xb);
+    const std::vector<int> *cand = lookup(mid);
+    if (!cand) return;
+    const double half_e = 0.5 * norm(xb - xa);
     for (int id : *cand) {
       const Segment &sg = segs_[id];
+      if (sg.yarn == skip) continue;
       const Vec3 dc = mid - sg.c;
       const double reach = half_e + sg.half + sg.radius + r + margin;
       if (dot(dc, dc) > reach * reach) continue;
@@ -139,9 +156,11 @@ class StaticBodies {
       const double dist = norm(d);
       const double h = dist - sg.radius - r;
       if (h >= margin || !(dist > 0.0)) continue;
-      insert(out, yarn, nhit, sg.yarn, se, (1.0 / dist) * d, h, sg.radius);
+      BodyHit hit{se, (1.0 / dist) * d, h, sg.radius, Vec3{}};
+      hit.seg = id;
+      hit.t = ty;
+      out.push_back(hit);
     }
-    return nhit;
   }
   // Yarns near a node at x of radius r (single-node fibers).
   int node_hits(Vec3 x, double r, double margin, BodyHit out[kMaxHits]) const {
@@ -184,80 +203,63 @@ class StaticBodies {
       yarn[slot] = y;
       out[slot].h = std::numeric_limits<double>::max();
     }
-    if (h < out[slot].h) out[slot] = BodyHit{s, n, h, r2, Vec3{}};
+    if (h < out[slot].h) out[slot] = BodyHit{s, n, h, r2, Vec3{}, -1, 0.0};
   }
 
   std::vector<Segment> segs_;
   std::vector<Plane> planes_;
   std::unordered_map<long, std::vector<int>> bins_;
+  mutable std::vector<BodyHit> scratch_;  // element_hits
   bool bins_valid_ = false;
   double size_ = 1.0, lo_[3] = {0, 0, 0}, reach_ = 0.0;
 };
 
-// Contact of one fiber with the static bodies inside its implicit step (see the file comment).
-class StaticContactModel : public rod::NodeForceModel {
+// Contact of one fiber with bodies of known motion inside its implicit step (the part of
+// StaticContactModel that a model of other bodies of known motion would share): the fiber/dlvo law
+// at each contact point (gap h, unit normal n from the body to the fiber, velocity relative to the
+// body's), its tangent, and the correction limiter.
+class BodyContactModel : public rod::NodeForceModel {
  public:
   static constexpr double kStick = 100.0;  // stick damping c_stick = kStick m / h
 
-  StaticContactModel(const StaticBodies &bodies, const ContactLaw &law, double friction)
-      : bodies_(bodies), law_(law), mu_(friction) {}
+  BodyContactModel(const ContactLaw &law, double friction) : law_(law), mu_(friction) {}
 
-  void begin_step(double h) override { h_ = h; }
-
-  void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
-    near_.clear();
-    contacts_ = 0;
-    min_gap_ = std::numeric_limits<double>::max();
-    const std::size_t n = nodes.size();
-    BodyHit hits[StaticBodies::kMaxHits];
-    const double margin = law_.h_cut;
-    for (std::size_t k = 0; k < n; ++k) {
-      const rod::Node &a = nodes[k];
-      for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
-        const double h = bodies_.plane_gap(p, a.x, a.radius);
-        if (h < a.radius + margin)
-          act(nodes, F, J, static_cast<int>(k), -1,
-              BodyHit{0.0, bodies_.planes()[p].n, h, INFINITY, bodies_.planes()[p].v});
-      }
-      if (bodies_.segments().empty()) continue;
-      if (n == 1) {
-        const int nh = bodies_.node_hits(a.x, a.radius, a.radius + margin, hits);
-        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), -1, hits[q]);
-      } else if (k + 1 < n) {
-        const rod::Node &b = nodes[k + 1];
-        const double r = std::max(a.radius, b.radius);
-        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits);
-        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q]);
-      }
-    }
-  }
+  void begin_step(const std::vector<rod::Node> &, double, double h) override { h_ = h; }
 
   double limit(const std::vector<rod::Node> &, const std::vector<Vec3> &dx) const override {
     // landing gap 0: there the servo S1 has its full bell (B1(0) = 1) and stiffness; at h_R both
     // vanish (B1(h_R) = B1'(h_R) = 0) and the next iterate would not see the contact
     double frac = 1.0;
-    const double hR = law_.steric.h_R, cap = law_.steric.cap(), land = 0.0;
     for (const Near &c : near_) {
       Vec3 d = c.wa * dx[c.a];
       if (c.b >= 0) d = d + c.wb * dx[c.b];
-      const double dh = dot(c.n, d);
-      const double h1 = c.h + dh;
-      if (c.h > land && h1 < land - cap) frac = std::min(frac, (c.h - land) / (c.h - h1));
-      else if (c.h < land - cap && h1 > hR + cap) frac = std::min(frac, (land - c.h) / (h1 - c.h));
+      frac = std::min(frac, landing_fraction(law_, c.h, dot(c.n, d)));
     }
     return frac;
+  }
+  // The part in (0, 1] of a gap change dh from h that the correction limiter accepts (file comment).
+  static double landing_fraction(const ContactLaw &law, double h, double dh) {
+    const double hR = law.steric.h_R, cap = law.steric.cap(), land = 0.0;
+    const double h1 = h + dh;
+    // (a gap already at the landing point is let through: cutting there would stall the iteration)
+    if (h > land + 1e-3 * cap && h1 < land - cap) return (h - land) / (h - h1);
+    if (h < land - cap && h1 > hR + cap) return (land - h) / (h1 - h);
+    // leaving the servo's range from inside it: stop at its edge (else the next iterate sees no
+    // force, falls back in, and the iteration cycles between the two)
+    const double edge = hR + cap;
+    if (h < edge - 0.1 * cap && h1 > edge) return (edge - h) / (h1 - h);
+    return 1.0;
   }
 
   int contacts() const { return contacts_; }    // gaps below h_cut at the last evaluation
   double min_gap() const { return min_gap_; }   // smallest gap at the last evaluation (m)
 
- private:
-  struct Near {
-    int a, b;
-    double wa, wb;
-    Vec3 n;
-    double h;
-  };
+ protected:
+  void reset() {
+    near_.clear();
+    contacts_ = 0;
+    min_gap_ = std::numeric_limits<double>::max();
+  }
 
   // one contact point: element a-b (b < 0: node a) at the hit
   void act(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J, int a, int b,
@@ -293,6 +295,8 @@ class StaticContactModel : public rod::NodeForceModel {
     const double dFdh = (pl.force(hit.h + dh, u) - pl.force(hit.h - dh, u)) / (2.0 * dh);
     const double du = 1e-6 + 1e-4 * std::fabs(u);
     const double dFdu = (pl.force(hit.h, u + du) - pl.force(hit.h, u - du)) / (2.0 * du);
+    // friction by its secant coefficient (the consistent derivative, measured: Newton failed in the
+    // stick-slip tests of tests/test_static_bodies.cpp)
     double Kx[9], Cv[9];
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) {
@@ -307,13 +311,58 @@ class StaticContactModel : public rod::NodeForceModel {
     J->add(static_cast<std::size_t>(b), static_cast<std::size_t>(b), wb * wb, Kx, Cv);
   }
 
-  const StaticBodies &bodies_;
   const ContactLaw &law_;
   double mu_ = 0.0;
   double h_ = 0.0;
+
+ private:
+  struct Near {
+    int a, b;
+    double wa, wb;
+    Vec3 n;
+    double h;
+  };
   std::vector<Near> near_;
   int contacts_ = 0;
   double min_gap_ = 0.0;
+};
+
+// Contact of one fiber with the static bodies inside its implicit step (see the file comment).
+class StaticContactModel : public BodyContactModel {
+ public:
+  StaticContactModel(const StaticBodies &bodies, const ContactLaw &law, double friction)
+      : BodyContactModel(law, friction), bodies_(bodies) {}
+
+  void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
+    reset();
+    const std::size_t n = nodes.size();
+    BodyHit hits[StaticBodies::kMaxHits];
+    const double margin = law_.h_cut;
+    for (std::size_t k = 0; k < n; ++k) {
+      const rod::Node &a = nodes[k];
+      for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
+        const double h = bodies_.plane_gap(p, a.x, a.radius);
+        if (h < a.radius + margin)
+          act(nodes, F, J, static_cast<int>(k), -1,
+              BodyHit{0.0, bodies_.planes()[p].n, h, INFINITY, bodies_.planes()[p].v, -1, 0.0});
+      }
+      if (bodies_.segments().empty()) continue;
+      // nodes of several fibers may be solved together (a contact cluster): Node::next
+      const bool has_next = k + 1 < n && a.next, has_prev = k > 0 && nodes[k - 1].next;
+      if (!has_next && !has_prev) {  // a single-node fiber
+        const int nh = bodies_.node_hits(a.x, a.radius, a.radius + margin, hits);
+        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), -1, hits[q]);
+      } else if (has_next) {
+        const rod::Node &b = nodes[k + 1];
+        const double r = std::max(a.radius, b.radius);
+        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits);
+        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q]);
+      }
+    }
+  }
+
+ private:
+  const StaticBodies &bodies_;
 };
 
 }  // namespace fiberform::physics

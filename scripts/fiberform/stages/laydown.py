@@ -181,7 +181,7 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
               "terms", terms, "friction", ld.friction_coefficient)
     c = scene.contact
     if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
-        s.command("pair_style", "fiber/dlvo", *pair_options(scene))
+        s.command("pair_style", "fiber/dlvo", *pair_options(scene, ld.fiber_contact_mode))
         s.command("pair_coeff", STAR, STAR)
     s.command("timestep", ld.timestep_s)
     s.command("variable", "settled", "equal", fix_ref("yarns", 7))
@@ -220,13 +220,18 @@ def contact_integrator_words(ld: Any, wall: bool) -> list[object]:
     return ["integrator", "substep", "substeps", ld.contact_substeps]
 
 
-def pair_options(scene: Scene) -> list[object]:
-    """pair_style fiber/dlvo keywords from the scene's contact section."""
+def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
+    """pair_style fiber/dlvo keywords from the scene's contact section; mode: laydown.fiber_contact
+    (newton: the contacts inside the fibers' Newton solves, no sub-integration keywords)."""
     c = scene.contact
     assert c is not None
-    out: list[object] = ["integrator", c.integrator]
-    if c.integrator == "substep":
-        out.append(c.substeps)
+    out: list[object]
+    if mode == "newton":
+        out = ["implicit_force", "newton"]
+    else:
+        out = ["integrator", c.integrator]
+        if c.integrator == "substep":
+            out.append(c.substeps)
     out += ["terms", ident_list(c.terms)]
     if c.hamaker_J is not None:
         out += ["hamaker", c.hamaker_J]
@@ -236,7 +241,7 @@ def pair_options(scene: Scene) -> list[object]:
         out += ["psi", c.surface_potential_V]
     if c.cutoff_m is not None:
         out += ["h_cut", c.cutoff_m]
-    if c.points_per_element is not None:
+    if c.points_per_element is not None and mode != "newton":
         out += ["points", c.points_per_element]
     return out
 
@@ -316,21 +321,24 @@ def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Ar
     return out
 
 
-def fiber_fiber_clearance(x: Array, offsets: Array, radius: float) -> float:
-    """Smallest (distance between the centre lines of two elements of DIFFERENT fibers - the fiber
-    radius) over all such pairs, m (< 0: a fiber's centre line inside another fiber: a
-    pass-through; the contact law's own overlaps are nanometres)."""
+def fiber_fiber_gap(x: Array, offsets: Array, radius: Array) -> float:
+    """Smallest surface gap between elements of DIFFERENT fibers, m: centre-line distance minus
+    the radii of both elements (an element's radius: the larger of its nodes' ``radius``, one per
+    row of x). The contact law keeps it above about -10 nm; below -(radius) a centre line is
+    inside another fiber (a pass-through). inf with fewer than two fibers."""
     owner = np.concatenate([np.full(max(0, hi - lo - 1), k) for k, (lo, hi) in
                             enumerate(zip(offsets[:-1], offsets[1:]))] or [np.zeros(0)]).astype(np.int64)
     idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])
                           if hi - lo > 1] or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
     if len(idx) < 2 or len(np.unique(owner)) < 2:
         return math.inf
+    r_el = np.maximum(radius[idx], radius[idx + 1])
     out = math.inf
     for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
         d = segment_distances(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+        d = d - r_el[chunk][:, None] - r_el[None, :]
         d[owner[chunk][:, None] == owner[None, :]] = math.inf
-        out = min(out, float(d.min()) - radius)
+        out = min(out, float(d.min()))
     return out
 
 
@@ -441,6 +449,13 @@ class Laydown(Stage):
         if scene.contact is not None and scene.contact.model != "fiber_dlvo":
             problems.append("contact.model: the lay-down supports fiber_dlvo only (fiber-fiber "
                             "contact of the fix fiber/beam fibers)")
+        c = scene.contact
+        if c is not None and ld.fiber_contact_mode == "newton":
+            unused = sorted({"integrator", "substeps", "points_per_element"} & c.model_fields_set)
+            if unused:
+                problems.append(f"contact.{unused[0]}: only used with laydown.fiber_contact averaged "
+                                "(with newton, the default for implicit fibers, fiber contacts are "
+                                "solved inside the fibers' Newton solves)")
         if removal_height(scene) <= scene.domain.lo_m[2]:
             problems.append("laydown.removal_height_m: must lie above domain.lo_m[2] (fibers "
                             "leaving the box would be lost)")
@@ -489,6 +504,7 @@ class Laydown(Stage):
             f_off = np.asarray(fh["fibers/offsets"][...], dtype=np.int64)
             f_mass = np.asarray(fh["fibers/mass"][...], dtype=float)
             x0 = np.asarray(fh["fibers/x"][...], dtype=float)
+            f_radii = np.asarray(fh["fibers/radii"][...], dtype=float)
         steps_per_check, checks = run_lengths(scene)
         with h5py.File(ctx.scene.output_path / FlowStage.folder / FlowStage.products[0], "r") as fh:
             u_s = float(fh["flow_rate/superficial_velocity"][()])
@@ -562,9 +578,15 @@ class Laydown(Stage):
                       "sum of LIGGGHTS node masses left (cross-check of sheet_mass)")
         clearances = np.array([element_clearance(*frame_fibers(fr.columns)[::2], pts, offs, rad)
                                if len(fr.ids) else math.inf for fr in frames])
-        fiber_clearances = np.array([
-            fiber_fiber_clearance(*frame_fibers(fr.columns)[::2], 0.5 * f.width_m)
-            if len(fr.ids) else math.inf for fr in frames])
+        # contact radius of every generated node (fix fiber/beam: the larger outer half-axis)
+        node_r = np.max(f_radii[:, :2], axis=1)
+
+        def frame_gap(columns: Mapping[str, Any]) -> float:
+            x, present, offsets = frame_fibers(columns)
+            r = np.concatenate([node_r[f_off[k]:f_off[k + 1]] for k in present])
+            return fiber_fiber_gap(x, offsets, r)
+
+        fiber_gaps = np.array([frame_gap(fr.columns) if len(fr.ids) else math.inf for fr in frames])
         max_speeds = np.array([
             float(np.max(np.linalg.norm(np.stack([fr.columns[c] for c in ("vx", "vy", "vz")], 1), axis=1)))
             if len(fr.ids) else 0.0 for fr in frames])
@@ -581,7 +603,7 @@ class Laydown(Stage):
             "min_element_clearance_m": float(clearances.min()) if len(clearances) else math.inf,
             "grammage_kg_m2": m_sheet / area,
             "approximations": json_list(approximations(scene)),
-            "fiber_contact": ("pair_style fiber/dlvo " + " ".join(str(v) for v in pair_options(scene))
+            "fiber_contact": ("pair_style fiber/dlvo " + " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode))
                               if scene.contact is not None else "none"),
             "walls": ld.walls,
             "ranks": ld.ranks,
@@ -598,10 +620,10 @@ class Laydown(Stage):
                       "smallest distance between a fiber element's centre line and a yarn "
                       "centre line minus the yarn radius, per snapshot (< 0: fiber passes "
                       "through a yarn)")
-        write_dataset(snap, "min_fiber_fiber_clearance", fiber_clearances, "m",
-                      "smallest distance between the centre lines of elements of two different "
-                      "fibers minus the fiber radius, per snapshot (< 0: a fiber passes through "
-                      "another)")
+        write_dataset(snap, "min_fiber_fiber_gap", fiber_gaps, "m",
+                      "smallest surface gap between elements of two different fibers (centre-line "
+                      "distance minus both elements' radii), per snapshot (the contact law keeps "
+                      "it above about -10 nm; below minus the radius: a fiber passes through another)")
         write_dataset(snap, "max_speed", max_speeds, "m/s", "largest node speed per snapshot")
         write_dataset(snap, "max_fiber_speed", fiber_speeds, "m/s",
                       "largest fiber centre-of-mass speed per snapshot")
@@ -638,10 +660,10 @@ class Laydown(Stage):
             f"radius) over all {len(frames)} snapshots: {clearances.min() * 1e6:.3f} um "
             f"({'OK, >= 0' if clearances.min() >= 0 else 'VIOLATED'}; fiber radius "
             f"{0.5 * f.width_m * 1e6:.1f} um)",
-            f"- no fiber passes through another: smallest distance between the centre lines of "
-            f"elements of two fibers minus the fiber radius over all snapshots: "
-            f"{fiber_clearances.min() * 1e6:.3f} um "
-            f"({'OK, >= 0' if fiber_clearances.min() >= 0 else 'VIOLATED'})",
+            f"- no fiber passes through another: smallest surface gap between elements of two "
+            f"fibers (centre-line distance minus both radii) over all snapshots: "
+            f"{fiber_gaps.min() * 1e9:.1f} nm "
+            f"({'OK, no overlap beyond 5 % of a radius' if fiber_gaps.min() > -0.025 * f.width_m else 'VIOLATED'})",
             f"- fiberdem wall time: {wall:.1f} s on {ld.ranks} rank(s)"
             + (f" (this part: resumed from the restart file of step {resume_step})"
                if resume_step is not None else ""), "",
@@ -756,10 +778,13 @@ def approximations(scene: Scene) -> list[str]:
     if c is None:
         out.append("no fiber-fiber contact (fibers may overlap in the sheet)")
     else:
+        newton = ld.fiber_contact_mode == "newton"
         out.append("fiber-fiber contact: pair_style fiber/dlvo " +
-                   " ".join(str(v) for v in pair_options(scene)) +
-                   " (points 'auto' unless given; steric parameters: the style's defaults, "
-                   "docs/models/contact.md)")
+                   " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode)) +
+                   (" (fibers in contact solved together, law at the closest points of element "
+                    "centre lines, circular sections of the larger half-axis, no self-contact; "
+                    if newton else " (points 'auto' unless given; ") +
+                   "steric parameters: the style's defaults, docs/models/contact.md)")
     if ld.walls == "wall_fiber_dlvo":
         out.append("side walls: fix wall/fiber/dlvo (contact developers' fix)")
     elif ld.walls == "wall_gran":

@@ -1,0 +1,289 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later
+   Fiber-fiber contact INSIDE the implicit step (docs/models/contact.md section 9): contact clusters.
+
+   Fibers whose elements may touch during a step are solved together in one Newton solve (a
+   "cluster"; physics/implicit_rod.h solves several fibers at once when Node::next separates them).
+   The contact of two elements of different fibers of a cluster is the fiber/dlvo law
+   (physics/contact_law.h) at the END-of-step state of both, at the closest points of their centre
+   lines (parameters s, t): gap h = |d| - r_A - r_B, d = x_A(s) - x_B(t), n = d / |d|, rate
+   u = n . (v_A(s) - v_B(t)), reduced mass of the two contact points (lever rule:
+   1/m_point = (1-s)^2/m_a + s^2/m_b). The force f(h, u) n acts on A's nodes with weights (1-s, s) and
+   -f n on B's with (1-t, t): action equals reaction exactly, at every Newton iterate. Its tangent is
+   the rank-one term of ForceJacobian::Coupling (the rotation of n and the motion of s, t are left
+   out, as for the static bodies), which the Stepper solves by the Woodbury identity.
+
+   Why clusters. Solving each fiber alone against its partners' predicted motion (tried first) is a
+   Jacobi iteration on a stiff coupling: a fiber resting on another that rests on yarns overshoots
+   and the pair was driven through the yarns at steps of 1e-5 s (docs/models/contact.md section 9).
+
+   FiberPartners holds the start-of-step state of every fiber (all ranks hold all of it: fix
+   fiber/dlvo/step gathers it), finds the candidate element pairs (surfaces closer than a margin that
+   covers the motion over the step), and joins fibers connected by candidate pairs into clusters
+   (union-find; a cluster is named by its smallest fiber id). Pairs are detected with periodic
+   images: each carries the shift added to B's unwrapped coordinates. Sections: circles of the
+   nodes' radius (fix fiber/beam: the larger half-axis). Self-contact of a fiber and single-node
+   fibers are not modelled here.
+
+   Pure classes, SI units, no LIGGGHTS dependency; tests/test_fiber_partners.cpp. */
+#ifndef FIBERFORM_PHYSICS_FIBER_PARTNERS_H
+#define FIBERFORM_PHYSICS_FIBER_PARTNERS_H
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <vector>
+
+#include "static_bodies.h"
+
+namespace fiberform::physics {
+
+// Surface distance (m) below which two elements are candidates of a step of h (s): the law's range
+// plus twice the largest motion of two points over the step, from the largest node speed vmax (m/s)
+// and acceleration amax (m/s^2) at its start, plus 10 nm.
+inline double candidate_margin(const ContactLaw &law, double h, double vmax, double amax) {
+  return law.h_cut + 2.0 * (2.0 * h * vmax + h * h * amax) + 10e-9;
+}
+
+class FiberPartners {
+ public:
+  struct Point {
+    Vec3 x, v;          // position (m), velocity (m/s) at the start of the step
+    double m = 0;       // node mass (kg)
+    double radius = 0;  // section radius (m)
+  };
+  struct Fiber {
+    int id;
+    std::vector<Point> pts;
+  };
+  // candidate pair: element k of fiber a (index into fibers) and element j of fiber b, b's
+  // coordinates shifted by `shift` (periodic image); fibers[a].id < fibers[b].id
+  struct Pair {
+    int a, k, b, j;
+    Vec3 shift;
+  };
+
+  void clear() {
+    fibers_.clear();
+    pairs_.clear();
+    by_cluster_.clear();
+    bodies_.clear_segments();
+  }
+  // periodic box lengths per axis (0: not periodic)
+  void set_periods(double lx, double ly, double lz) { period_ = {lx, ly, lz}; }
+  // one fiber's nodes in order, positions unwrapped (each node next to the previous one)
+  void add_fiber(int id, const std::vector<Point> &pts) { fibers_.push_back({id, pts}); }
+
+  // Candidate pairs and clusters. lo/hi: the box; margin: surface distance below which two
+  // elements are candidates (m; the law's range plus the relative motion over the step).
+  void build(Vec3 lo, Vec3 hi, double margin) {
+    bodies_.clear_segments();
+    seg_.clear();
+    pairs_.clear();
+    by_cluster_.clear();
+    double lmax = 0.0, rmax = 0.0, ext = 0.0;
+    for (const Fiber &f : fibers_) {
+      double len = 0.0;
+      for (std::size_t k = 0; k < f.pts.size(); ++k) {
+        rmax = std::max(rmax, f.pts[k].radius);
+        if (k + 1 < f.pts.size()) {
+          const double l = norm(f.pts[k + 1].x - f.pts[k].x);
+          lmax = std::max(lmax, l);
+          len += l;
+        }
+      }
+      ext = std::max(ext, len);
+    }
+    const double reach = lmax + 2.0 * rmax + margin;
+    const double pad = ext + reach;  // a fiber unwrapped from its first node reaches ext out of the box
+    const int nim[3] = {period_.x > 0 ? 1 : 0, period_.y > 0 ? 1 : 0, period_.z > 0 ? 1 : 0};
+    for (int fi = 0; fi < static_cast<int>(fibers_.size()); ++fi) {
+      const Fiber &f = fibers_[static_cast<std::size_t>(fi)];
+      for (int k = 0; k + 1 < static_cast<int>(f.pts.size()); ++k) {
+        const Vec3 a = f.pts[static_cast<std::size_t>(k)].x, b = f.pts[static_cast<std::size_t>(k + 1)].x;
+        const double r = std::max(f.pts[static_cast<std::size_t>(k)].radius, f.pts[static_cast<std::size_t>(k + 1)].radius);
+        for (int ix = -nim[0]; ix <= nim[0]; ++ix)
+          for (int iy = -nim[1]; iy <= nim[1]; ++iy)
+            for (int iz = -nim[2]; iz <= nim[2]; ++iz) {
+              const Vec3 sh{ix * period_.x, iy * period_.y, iz * period_.z};
+              const Vec3 xa = a + sh, xb = b + sh;
+              bool inside = true;
+              for (int c = 0; c < 3; ++c)
+                if (std::max(xa[c], xb[c]) < lo[c] - pad || std::min(xa[c], xb[c]) > hi[c] + pad) inside = false;
+              if (!inside) continue;
+              bodies_.add_segment(xa, xb, r, fi);
+              seg_.push_back({fi, k, sh});
+            }
+      }
+    }
+    bodies_.build_bins(reach);
+    // pairs, each once (from the fiber of smaller id, unshifted)
+    std::vector<BodyHit> hits;
+    parent_.resize(fibers_.size());
+    std::iota(parent_.begin(), parent_.end(), 0);
+    for (int fa = 0; fa < static_cast<int>(fibers_.size()); ++fa) {
+      const Fiber &f = fibers_[static_cast<std::size_t>(fa)];
+      for (int k = 0; k + 1 < static_cast<int>(f.pts.size()); ++k) {
+        const Point &p = f.pts[static_cast<std::size_t>(k)], &q = f.pts[static_cast<std::size_t>(k + 1)];
+        hits.clear();
+        bodies_.element_segment_hits(p.x, q.x, std::max(p.radius, q.radius), margin, fa, hits);
+        for (const BodyHit &g : hits) {
+          const SegRef &sr = seg_[static_cast<std::size_t>(g.seg)];
+          if (fibers_[static_cast<std::size_t>(sr.fiber)].id < f.id) continue;
+          pairs_.push_back({fa, k, sr.fiber, sr.k, sr.shift});
+          unite(fa, sr.fiber);
+        }
+      }
+    }
+    for (std::size_t q = 0; q < pairs_.size(); ++q) by_cluster_[cluster(pairs_[q].a)].push_back(static_cast<int>(q));
+  }
+
+  int fiber_count() const { return static_cast<int>(fibers_.size()); }
+  const Fiber &fiber(int index) const { return fibers_[static_cast<std::size_t>(index)]; }
+  // the cluster of fiber `index`: the index of its fiber of smallest id
+  int cluster(int index) {
+    int r = index;
+    while (parent_[static_cast<std::size_t>(r)] != r) r = parent_[static_cast<std::size_t>(r)];
+    while (parent_[static_cast<std::size_t>(index)] != r) {
+      const int nx = parent_[static_cast<std::size_t>(index)];
+      parent_[static_cast<std::size_t>(index)] = r;
+      index = nx;
+    }
+    return r;
+  }
+  const std::vector<Pair> &pairs() const { return pairs_; }
+  // the pairs of the cluster named by fiber index c (empty if none)
+  const std::vector<int> &cluster_pairs(int c) const {
+    static const std::vector<int> none;
+    auto it = by_cluster_.find(c);
+    return it == by_cluster_.end() ? none : it->second;
+  }
+
+ private:
+  struct SegRef {
+    int fiber;   // index into fibers_
+    int k;       // first node of the element
+    Vec3 shift;  // periodic image shift (m)
+  };
+  // union by smallest fiber id: the root is always the member of smallest id
+  void unite(int a, int b) {
+    a = cluster(a);
+    b = cluster(b);
+    if (a == b) return;
+    if (fibers_[static_cast<std::size_t>(b)].id < fibers_[static_cast<std::size_t>(a)].id) std::swap(a, b);
+    parent_[static_cast<std::size_t>(b)] = a;
+  }
+
+  std::vector<Fiber> fibers_;
+  std::vector<SegRef> seg_;
+  std::vector<Pair> pairs_;
+  std::vector<int> parent_;
+  std::map<int, std::vector<int>> by_cluster_;
+  StaticBodies bodies_;
+  Vec3 period_;
+};
+
+// The fiber-fiber contacts of one cluster inside its implicit step (see the file comment).
+class ClusterContactModel : public rod::NodeForceModel {
+ public:
+  ClusterContactModel(const FiberPartners &partners, const ContactLaw &law) : partners_(partners), law_(law) {}
+
+  // fibers: ids of the cluster's fibers in node-vector order, offsets: their first nodes
+  void begin_cluster(const std::vector<int> &fibers, const std::vector<int> &offsets) override {
+    local_.clear();
+    if (fibers.empty()) return;
+    std::map<int, int> first;  // fiber id -> first node
+    for (std::size_t q = 0; q < fibers.size(); ++q) first[fibers[q]] = offsets[q];
+    // the cluster's pairs are filed under its fiber of smallest id
+    int c = -1;
+    for (int i = 0; i < partners_.fiber_count() && c < 0; ++i)
+      if (partners_.fiber(i).id == fibers.front()) c = i;
+    if (c < 0) return;
+    for (int q : partners_.cluster_pairs(c)) {
+      const FiberPartners::Pair &p = partners_.pairs()[static_cast<std::size_t>(q)];
+      auto ia = first.find(partners_.fiber(p.a).id), ib = first.find(partners_.fiber(p.b).id);
+      if (ia == first.end() || ib == first.end()) continue;
+      local_.push_back({ia->second + p.k, ib->second + p.j, p.shift});
+    }
+  }
+  void begin_fiber(int) override { local_.clear(); }
+
+  void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
+    near_.clear();
+    contacts_ = 0;
+    min_gap_ = std::numeric_limits<double>::max();
+    for (const Local &lp : local_) {
+      const int idx[4] = {lp.a, lp.a + 1, lp.b, lp.b + 1};
+      const rod::Node &A0 = nodes[static_cast<std::size_t>(idx[0])], &A1 = nodes[static_cast<std::size_t>(idx[1])];
+      const rod::Node &B0 = nodes[static_cast<std::size_t>(idx[2])], &B1 = nodes[static_cast<std::size_t>(idx[3])];
+      double s, t;
+      closest_params_segment_segment(A0.x, A1.x, B0.x + lp.shift, B1.x + lp.shift, s, t);
+      const Vec3 d = lerp(A0.x, A1.x, s) - (lerp(B0.x, B1.x, t) + lp.shift);
+      const double dist = norm(d);
+      if (!(dist > 0.0)) continue;
+      const double rA = std::max(A0.radius, A1.radius), rB = std::max(B0.radius, B1.radius);
+      const double h = dist - rA - rB;
+      const Vec3 n = (1.0 / dist) * d;
+      const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
+      near_.push_back({{idx[0], idx[1], idx[2], idx[3]}, {w[0], w[1], w[2], w[3]}, n, h});
+      min_gap_ = std::min(min_gap_, h);
+      if (h >= law_.h_cut) continue;
+      ++contacts_;
+      const double u = dot(n, lerp(A0.v, A1.v, s) - lerp(B0.v, B1.v, t));
+      const double inv_mA = w[0] * w[0] / A0.m + w[1] * w[1] / A1.m;
+      const double inv_mB = w[2] * w[2] / B0.m + w[3] * w[3] / B1.m;
+      PairLaw pl;
+      pl.setup(law_, rA, rB, inv_mA, inv_mB, law_.effective_potential(rA), law_.effective_potential(rB));
+      const double f = pl.force(h, u);
+      for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] + (w[i] * f) * n;
+      if (!J) continue;
+      const double dh = 1e-3 * law_.steric.h_R;
+      const double du = 1e-6 + 1e-4 * std::fabs(u);
+      rod::ForceJacobian::Coupling c;
+      for (int i = 0; i < 4; ++i) {
+        c.node[i] = idx[i];
+        c.w[i] = w[i];
+      }
+      c.n = n;
+      c.dFdh = (pl.force(h + dh, u) - pl.force(h - dh, u)) / (2.0 * dh);
+      c.dFdu = (pl.force(h, u + du) - pl.force(h, u - du)) / (2.0 * du);
+      J->couplings.push_back(c);
+    }
+  }
+
+  double limit(const std::vector<rod::Node> &, const std::vector<Vec3> &dx) const override {
+    double frac = 1.0;
+    for (const Near &c : near_) {
+      Vec3 d;
+      for (int i = 0; i < 4; ++i) d = d + c.w[i] * dx[static_cast<std::size_t>(c.node[i])];
+      frac = std::min(frac, BodyContactModel::landing_fraction(law_, c.h, dot(c.n, d)));
+    }
+    return frac;
+  }
+
+  int contacts() const { return contacts_; }   // pairs below h_cut at the last evaluation
+  double min_gap() const { return min_gap_; }  // smallest gap of the candidate pairs (m)
+  std::size_t candidates() const { return local_.size(); }
+
+ private:
+  struct Local {
+    int a, b;  // first nodes of the two elements in the node vector
+    Vec3 shift;
+  };
+  struct Near {
+    int node[4];
+    double w[4];
+    Vec3 n;
+    double h;
+  };
+  const FiberPartners &partners_;
+  const ContactLaw &law_;
+  std::vector<Local> local_;
+  std::vector<Near> near_;
+  int contacts_ = 0;
+  double min_gap_ = 0.0;
+};
+
+}  // namespace fiberform::physics
+
+#endif
