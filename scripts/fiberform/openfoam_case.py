@@ -48,6 +48,7 @@ __all__ = [
     "run_case",
     "template_dir",
     "template_hash",
+    "volume_preserving",
     "voxel_fraction",
 ]
 
@@ -320,6 +321,19 @@ def voxel_fraction(img: VoxelImage, s: BoxSetup, lat: Lattice) -> npt.NDArray[np
     return frac.reshape(lat.nx, lat.ny, lat.n_fabric).astype(np.float32)
 
 
+def volume_preserving(frac: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """0/1 solid indicator of equal-volume cells: the m cells with the largest solid fractions,
+    m = round(sum of the fractions), so the removed volume equals the sampled solid volume (the
+    rule "fraction >= 1/2" overestimates the solid of thin cylinders by several percent at 8
+    cells across: 0.107 instead of 0.1 for a square array at solid fraction 0.1)."""
+    flat = np.asarray(frac, dtype=np.float64).ravel()
+    m = int(round(float(flat.sum())))
+    out = np.zeros(flat.size, dtype=np.float32)
+    if m > 0:
+        out[np.argsort(-flat, kind="stable")[:m]] = 1.0
+    return out.reshape(np.shape(frac))
+
+
 def _layers(z: FloatArray, tol: float) -> FloatArray:
     """Distinct heights of cell centres (values closer than ``tol`` are one layer)."""
     zs = np.sort(z)
@@ -355,11 +369,14 @@ def run_case(
     work: Path,
     *,
     record_flow_rate: bool = False,
+    preserve_volume: bool = False,
     oversubscribe: bool = False,
     show_progress: bool | None = None,
 ) -> CaseResult:
     """Mesh, solve and read back one case in ``work`` (``work/case`` is replaced; logs
-    ``work/log.<tool>``). ``record_flow_rate`` adds the per-iteration outflow history."""
+    ``work/log.<tool>``). ``record_flow_rate`` adds the per-iteration outflow history;
+    ``preserve_volume`` removes the cells of :func:`volume_preserving` instead of those with solid
+    fraction >= 1/2."""
     lat = make_lattice(s)
     work = work.resolve()
     case = work / CASE_DIR
@@ -398,7 +415,10 @@ def run_case(
                          f"{(lat.nx, lat.ny, lat.n_fabric)}")  # fmt: skip
     frac = np.zeros((lat.nx, lat.ny, lat.nz), dtype=np.float32)
     frac[:, :, lat.n_below : lat.n_below + lat.n_fabric] = frac_f
-    _write_solid_field(case, frac[ci, cj, ck])
+    removal = frac.copy()
+    if preserve_volume:
+        removal[:, :, lat.n_below : lat.n_below + lat.n_fabric] = volume_preserving(frac_f)
+    _write_solid_field(case, removal[ci, cj, ck])
     tool(["topoSet"], "topoSet")
     tool(["subsetMesh", "fluid", "-patch", "yarns", "-overwrite"], "subsetMesh")
     # subsetMesh also subset the cell-centre field: the centres of the kept cells, in the new

@@ -640,7 +640,8 @@ class PermeabilitySection(_Section):
     )  # fmt: skip
     subsamples: int = quantity(
         "Sample points per cell edge for the solid volume fraction of a cell (subsamples^3 per "
-        "cell; a cell is solid when >= 1/2 of them are)", "1", default=4, ge=1, le=16,
+        "cell; the cells with the largest fractions are removed up to the sampled solid volume)",
+        "1", default=4, ge=1, le=16,
     )  # fmt: skip
     height_above_m: float = quantity(
         "Domain top above the highest solid point (fabric or sheet)", "m", default=0.5e-3,

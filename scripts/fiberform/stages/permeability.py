@@ -8,9 +8,11 @@ stage: symmetry on the four vertical sides, fixed pressure at the top and the bo
 zero-gradient velocity, no-slip on yarns and fibers; laminar steady Navier-Stokes (stock simpleFoam,
 SIMPLEC) through :mod:`fiberform.openfoam_case`. Mode ``resolved``: the solid zone (fabric lower
 side to the top of the sheet) has cubic cells of d_min / ``cells_across_fiber`` (d_min: the
-thinnest fiber diameter, or the thinnest yarn for a bare fabric); a cell is removed when at least
-half of its ``subsamples``^3 sample points lie inside a fiber or yarn (capsule chains: the yarns of
-the generated fabric and the sheet's fibers; imported fabrics through their voxel image).
+thinnest fiber diameter, or the thinnest yarn for a bare fabric); each zone cell gets the fraction
+of its ``subsamples``^3 sample points inside a fiber or yarn (capsule chains: the yarns of the
+generated fabric and the sheet's fibers; imported fabrics through their voxel image), and the cells
+with the largest fractions are removed until the removed volume equals the sampled solid volume
+(:func:`fiberform.openfoam_case.volume_preserving`).
 
 Convergence (thesis sec. 5.2: the permeability "oscillates"): simpleFoam stops when the initial
 residuals of p and U fall below ``residual_tolerance`` or at ``max_iterations``; the outflow through
@@ -217,7 +219,7 @@ class PermeabilityStage(Stage):
         start = time.monotonic()
         res = run_case(
             s, solid_fraction(geo, perm.subsamples), self.stage_dir(ctx), record_flow_rate=True,
-            oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
+            preserve_volume=True, oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
         )  # fmt: skip
         wall = time.monotonic() - start
         conv = flow_rate_convergence(res.history_q_bottom_m3_s, perm.convergence_window,
