@@ -188,6 +188,8 @@ class PermeabilityStage(Stage):
             top = max(top, float(np.max(c.points[:, 2])) + c.radius)
         if fibers:
             thinnest = 2.0 * min(c.radius for c in fibers)
+        elif "laydown_h5" in paths and ctx.scene.fibers is not None:
+            thinnest = ctx.scene.fibers.width_m  # an empty sheet: the mesh of the sheets
         elif yarns:
             thinnest = 2.0 * min(c.radius for c in yarns)
         else:
