@@ -25,8 +25,9 @@ from __future__ import annotations
 import re
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -49,7 +50,9 @@ __all__ = [
     "template_dir",
     "template_hash",
     "volume_preserving",
+    "plot_section",
     "voxel_fraction",
+    "write_solver_record",
 ]
 
 CASE_DIR = "case"
@@ -488,3 +491,42 @@ def run_case(
         history_iteration=hist_it,
         history_q_bottom_m3_s=hist_q,
     )
+
+
+# --------------------------------------------------------------------------------------------
+# Output shared by the stages
+
+
+def write_solver_record(group: Any, s: BoxSetup, res: CaseResult) -> None:
+    """Attributes of an HDF5 group (``/solver``): application, iterations, residual convergence,
+    cell counts, ranks, wall time per tool (s), final initial residuals and the setup."""
+    group.attrs["application"] = "simpleFoam (laminar, SIMPLEC)"
+    group.attrs["iterations"] = res.iterations
+    group.attrs["converged"] = res.converged
+    group.attrs["lattice_cells"] = res.lattice_cells
+    group.attrs["fluid_cells"] = res.fluid_cells
+    group.attrs["ranks"] = s.ranks
+    for k, v in res.wall_times_s.items():
+        group.attrs[f"wall_time_{k}_s"] = v
+    for k, v in res.final_residuals.items():
+        group.attrs[f"final_initial_residual_{k}"] = v
+    for k, v in asdict(s).items():
+        group.attrs[f"setup_{k}"] = v if v is not None else "none"
+
+
+def plot_section(ax: Any, s: BoxSetup, res: CaseResult, values: FloatArray, title: str,
+                 margin_m: float) -> Any:  # fmt: skip
+    """Colour map of ``values`` (nx, nz) on the lattice plane y = Ly / 2 (pass that plane's
+    values), removed cells grey, z from ``margin_m`` below the zone to ``margin_m`` above it."""
+    j = len(res.lattice_y) // 2
+    X, Z = np.meshgrid(res.lattice_x * 1e3, res.lattice_z * 1e3, indexing="ij")
+    pc = ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], values, np.nan), shading="nearest",
+                       cmap="viridis")  # fmt: skip
+    ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], np.nan, 1.0), shading="nearest",
+                  cmap="Greys", vmin=0, vmax=1.5)  # fmt: skip
+    ax.set_ylim((s.fabric_lo_z_m - margin_m) * 1e3, min(s.top_z_m, s.fabric_hi_z_m + margin_m) * 1e3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("z [mm]")
+    ax.set_title(f"{title} at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: solid)")
+    return pc

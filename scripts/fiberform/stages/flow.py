@@ -32,7 +32,7 @@ import math
 import struct
 import time
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -41,7 +41,10 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..fabric_geometry import VoxelImage
-from ..openfoam_case import BoxSetup, CaseResult, run_case, template_hash, voxel_fraction
+from ..openfoam_case import (
+    BoxSetup, CaseResult, plot_section, run_case, template_hash, voxel_fraction,
+    write_solver_record,
+)  # fmt: skip
 from ..provenance import file_hash, write_dataset
 from ..scene import FlowSection, FluidSection, Scene
 from ._stage import Stage, StageContext
@@ -202,19 +205,7 @@ def write_flow_h5(h5: h5py.File, s: FlowSetup, res: FlowResult, grid: RegularGri
     write_dataset(fr, "superficial_velocity", res.q_bottom_m3_s / area, "m/s",
                   "bottom flow rate / piece area")  # fmt: skip
     write_dataset(fr, "delta_p", s.delta_p_Pa, "Pa", "pressure drop top - bottom")
-    sv = h5.create_group("solver")
-    sv.attrs["application"] = "simpleFoam (laminar, SIMPLEC)"
-    sv.attrs["iterations"] = res.iterations
-    sv.attrs["converged"] = res.converged
-    sv.attrs["lattice_cells"] = res.lattice_cells
-    sv.attrs["fluid_cells"] = res.fluid_cells
-    sv.attrs["ranks"] = s.ranks
-    for k, v in res.wall_times_s.items():
-        sv.attrs[f"wall_time_{k}_s"] = v
-    for k, v in res.final_residuals.items():
-        sv.attrs[f"final_initial_residual_{k}"] = v
-    for k, v in asdict(s).items():
-        sv.attrs[f"setup_{k}"] = v if v is not None else "none"
+    write_solver_record(h5.create_group("solver"), s, res)
 
 
 def write_png(path: Path, s: FlowSetup, res: FlowResult, title: str) -> None:
@@ -225,18 +216,8 @@ def write_png(path: Path, s: FlowSetup, res: FlowResult, title: str) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 5), gridspec_kw={"width_ratios": [1.4, 1]})
     j = len(res.lattice_y) // 2
-    w = np.where(res.fluid[:, j, :], -res.U[:, j, :, 2], np.nan)
-    zlo = s.fabric_lo_z_m - 0.5e-3
-    zhi = min(s.top_z_m, s.fabric_hi_z_m + 0.5e-3)
-    X, Z = np.meshgrid(res.lattice_x * 1e3, res.lattice_z * 1e3, indexing="ij")
+    pc = plot_section(axes[0], s, res, -res.U[:, j, :, 2], "downward velocity -U_z", 0.5e-3)
     ax = axes[0]
-    pc = ax.pcolormesh(X, Z, w, shading="nearest", cmap="viridis")
-    ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], np.nan, 1.0), shading="nearest", cmap="Greys", vmin=0, vmax=1.5)
-    ax.set_ylim(zlo * 1e3, zhi * 1e3)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("z [mm]")
-    ax.set_title(f"downward velocity -U_z at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: yarns)")
     fig.colorbar(pc, ax=ax, label="m/s", shrink=0.8)
     ax = axes[1]
     area = s.size_x_m * s.size_y_m

@@ -30,7 +30,7 @@ from __future__ import annotations
 import shutil
 import time
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -38,7 +38,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError, StageError
-from ..openfoam_case import BoxSetup, CaseResult, Lattice, make_lattice, run_case, template_hash
+from ..openfoam_case import (
+    BoxSetup, CaseResult, Lattice, make_lattice, plot_section, run_case, template_hash,
+    write_solver_record,
+)  # fmt: skip
 from ..porous_media import CFM_M_S, Convergence, capsule_fraction, flow_rate_convergence, image_fraction
 from ..products import (
     FABRIC_H5, FIBERS_H5, LAYDOWN_H5, Chain, read_fabric_image, read_sheet_chains,
@@ -291,19 +294,9 @@ def write_permeability_h5(
         ds = lg.create_dataset(name, data=data, compression="gzip", shuffle=True)
         ds.attrs.update(units=unit, description=desc)
     sv = h5.create_group("solver")
-    sv.attrs["application"] = "simpleFoam (laminar, SIMPLEC)"
-    sv.attrs["iterations"] = res.iterations
-    sv.attrs["residuals_converged"] = res.converged
-    sv.attrs["lattice_cells"] = res.lattice_cells
-    sv.attrs["fluid_cells"] = res.fluid_cells
+    write_solver_record(sv, s, res)
     sv.attrs["fibers"] = geo.fibers
     sv.attrs["wall_time_total_s"] = wall_s
-    for key, v in res.wall_times_s.items():
-        sv.attrs[f"wall_time_{key}_s"] = v
-    for key, v in res.final_residuals.items():
-        sv.attrs[f"final_initial_residual_{key}"] = v
-    for key, v in asdict(s).items():
-        sv.attrs[f"setup_{key}"] = v
     return out
 
 
@@ -345,17 +338,9 @@ def write_png(path: Path, s: BoxSetup, res: CaseResult, title: str) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 5), gridspec_kw={"width_ratios": [1.4, 1]})
     j = len(res.lattice_y) // 2
-    speed = np.where(res.fluid[:, j, :], np.linalg.norm(res.U[:, j, :, :], axis=-1), np.nan)
-    X, Z = np.meshgrid(res.lattice_x * 1e3, res.lattice_z * 1e3, indexing="ij")
+    speed = np.linalg.norm(res.U[:, j, :, :], axis=-1)
+    pc = plot_section(axes[0], s, res, speed, "speed |U|", 0.2e-3)
     ax = axes[0]
-    pc = ax.pcolormesh(X, Z, speed, shading="nearest", cmap="viridis")
-    ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], np.nan, 1.0), shading="nearest",
-                  cmap="Greys", vmin=0, vmax=1.5)  # fmt: skip
-    ax.set_ylim((s.fabric_lo_z_m - 0.2e-3) * 1e3, min(s.top_z_m, s.fabric_hi_z_m + 0.2e-3) * 1e3)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("z [mm]")
-    ax.set_title(f"speed |U| at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: solid)")
     fig.colorbar(pc, ax=ax, label="m/s", shrink=0.8)
     ax = axes[1]
     if len(res.history_iteration):
