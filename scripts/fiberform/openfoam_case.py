@@ -22,6 +22,7 @@ foamlib from validated numbers (no text from a scene reaches a case file).
 
 from __future__ import annotations
 
+import math
 import re
 import shutil
 from collections.abc import Callable
@@ -304,6 +305,63 @@ def _read_flow_rate_history(case: Path) -> tuple[npt.NDArray[np.int64], FloatArr
     return np.array(its, dtype=np.int64), np.array(qs, dtype=np.float64)
 
 
+#: Resistances within this factor of each other share one cellZone (one porosity source).
+ZONE_RATIO = 1.05
+
+
+def _write_porous_zones(case: Path, d_cells: FloatArray) -> bool:
+    """Bin the cells' Darcy resistances d [1/m^2] (0: none) in ratios of ZONE_RATIO, write the
+    field ``resistance`` to 0/, a topoSetDict.porous that makes one cellZone per bin and
+    constant/fvOptions with one explicitPorositySource (DarcyForchheimer, isotropic d = the bin's
+    geometric mean, f = 0) per zone. Returns False when no cell has a resistance."""
+    from foamlib import FoamFieldFile, FoamFile
+
+    pos = d_cells[d_cells > 0]
+    if len(pos) == 0:
+        return False
+    lo = float(pos.min())
+    nbins = int(math.floor(math.log(float(pos.max()) / lo) / math.log(ZONE_RATIO))) + 1
+    f = FoamFieldFile(case / "0" / "resistance")
+    f.dimensions = [0, -2, 0, 0, 0, 0, 0]
+    f.internal_field = np.asarray(d_cells, dtype=np.float64)
+    f.boundary_field = {p: {"type": "zeroGradient"} for p in ("top", "bottom", "yarns")}
+    f.boundary_field["sides"] = {"type": "symmetry"}
+    actions: list[dict[str, object]] = []
+    options: dict[str, object] = {}
+    used = np.floor(np.log(pos / lo) / math.log(ZONE_RATIO)).astype(np.int64)
+    for b in sorted(set(used.tolist())):
+        a, c = lo * ZONE_RATIO**b, lo * ZONE_RATIO ** (b + 1)
+        lo_edge = a * (1 - 1e-9) if b > 0 else a * 0.5
+        hi_edge = c * (1 - 1e-9) if b < nbins - 1 else c * 2.0
+        name = f"porous{b}"
+        actions.append({"name": name, "type": "cellSet", "action": "new", "source": "fieldToCell",
+                        "field": "resistance", "min": lo_edge, "max": hi_edge})  # fmt: skip
+        actions.append({"name": name, "type": "cellZoneSet", "action": "new",
+                        "source": "setToCellZone", "set": name})  # fmt: skip
+        d = math.sqrt(a * c)
+        options[name] = {
+            "type": "explicitPorositySource", "active": True,
+            "explicitPorositySourceCoeffs": {
+                "type": "DarcyForchheimer", "selectionMode": "cellZone", "cellZone": name,
+                "DarcyForchheimerCoeffs": {
+                    "d": [d, d, d], "f": [0.0, 0.0, 0.0],
+                    "coordinateSystem": {"type": "cartesian", "origin": [0.0, 0.0, 0.0],
+                                         "rotation": {"type": "axes", "e1": [1.0, 0.0, 0.0],
+                                                      "e2": [0.0, 1.0, 0.0]}},
+                },
+            },
+        }  # fmt: skip
+    header = {"version": 2.0, "format": "ascii", "class": "dictionary"}
+    with FoamFile(case / "system" / "topoSetDict.porous") as t:
+        t["FoamFile"] = {**header, "object": "topoSetDict"}
+        t["actions"] = actions
+    with FoamFile(case / "constant" / "fvOptions") as o:
+        o["FoamFile"] = {**header, "object": "fvOptions"}
+        for k, v in options.items():
+            o[k] = v
+    return True
+
+
 def voxel_fraction(img: VoxelImage, s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float32]:
     """Solid volume fraction of each zone cell from the voxels of ``img`` whose centres it holds.
     Shape (nx, ny, n_fabric)."""
@@ -373,13 +431,15 @@ def run_case(
     *,
     record_flow_rate: bool = False,
     preserve_volume: bool = False,
+    resistance: SolidFraction | None = None,
     oversubscribe: bool = False,
     show_progress: bool | None = None,
 ) -> CaseResult:
     """Mesh, solve and read back one case in ``work`` (``work/case`` is replaced; logs
     ``work/log.<tool>``). ``record_flow_rate`` adds the per-iteration outflow history;
     ``preserve_volume`` removes the cells of :func:`volume_preserving` instead of those with solid
-    fraction >= 1/2."""
+    fraction >= 1/2; ``resistance`` gives the Darcy resistance 1/k [1/m^2] of each zone cell
+    (sub-grid solid), applied by :func:`_write_porous_zones`."""
     lat = make_lattice(s)
     work = work.resolve()
     case = work / CASE_DIR
@@ -431,6 +491,13 @@ def run_case(
     fj = np.clip(np.floor(Cf[:, 1] / hy).astype(np.int64), 0, lat.ny - 1)
     fk = _nearest_layer(z_centres, Cf[:, 2], tol)
     _reset_fields(case, s)
+    if resistance is not None:
+        d_zone = np.asarray(resistance(s, lat), dtype=np.float64)
+        d_cells = np.zeros(len(Cf))
+        inz = (fk >= lat.n_below) & (fk < lat.n_below + lat.n_fabric)
+        d_cells[inz] = d_zone[fi[inz], fj[inz], fk[inz] - lat.n_below]
+        if _write_porous_zones(case, d_cells):
+            tool(["topoSet", "-dict", "system/topoSetDict.porous"], "topoSet.porous")
     for stale in case.glob("processor*"):
         shutil.rmtree(stale)
     shutil.rmtree(case / "postProcessing", ignore_errors=True)
