@@ -26,7 +26,9 @@ import numpy as np
 import pytest
 
 from fiberform.openfoam_case import BoxSetup, make_lattice, run_case
-from fiberform.porous_media import CFM_M_S, capsule_fraction, flow_rate_convergence
+from fiberform.porous_media import (
+    CFM_M_S, capsule_fraction, flow_rate_convergence, line_fraction, subgrid_resistance,
+)  # fmt: skip
 from fiberform.products import FABRIC_H5, FIBERS_H5, LAYDOWN_H5
 
 needs_openfoam = pytest.mark.skipif(shutil.which("simpleFoam") is None,
@@ -86,7 +88,10 @@ def test_reader_paths_match_the_stages() -> None:
 
 @pytest.mark.parametrize("bad,field", [
     ("pressure_drop_Pa: -125.0", "permeability.pressure_drop_Pa"),
-    ("mode: subgrid", "permeability.mode"),
+    ("mode: voxel", "permeability.mode"),
+    ("mode: subgrid, subgrid_law: kozeny", "permeability.subgrid_law"),
+    ("subgrid_cell_size_m: 50.0e-6", "permeability.subgrid_cell_size_m"),
+    ("mode: subgrid, cells_across_fiber: 4", "permeability.cells_across_fiber"),
     ("density_kg_m3: '1.2'", "permeability.density_kg_m3"),
     ("cells_across_fiber: 0", "permeability.cells_across_fiber"),
     ("cells_across_fiber: 64", "permeability.cells_across_fiber"),
@@ -156,6 +161,41 @@ def test_square_array_matches_drummond_tahir(phi: float, across: int, iterations
     assert k == pytest.approx(ref, rel=0.03)
 
 
+@pytest.mark.system
+@needs_openfoam
+@pytest.mark.parametrize("phi", [0.05, 0.1])
+def test_subgrid_square_array_matches_drummond_tahir(phi: float, tmp_path: Path) -> None:
+    """Sub-grid mode on the same array: no cell removed, one cell per period (2.8 to 4 cylinder
+    diameters wide), the cylinders as a Darcy resistance from the Drummond-Tahir law at each
+    cell's sampled solid fraction (line_fraction); k from the pressures of rows 2 and 5."""
+    a, rows = 10e-6, 6
+    L = a * math.sqrt(math.pi / phi)
+    s = BoxSetup(size_x_m=L, size_y_m=L, fabric_lo_z_m=L, fabric_hi_z_m=(rows + 1) * L,
+                 top_z_m=(rows + 2) * L, cell_size_m=L, max_cell_height_m=4 * L, delta_p_Pa=0.02,
+                 density_kg_m3=1.204, viscosity_Pa_s=1.81e-5, max_iterations=1000,
+                 residual_tolerance=1e-9)  # fmt: skip
+    chains = [(np.array([[L / 2, -a, (i + 1.5) * L], [L / 2, L + a, (i + 1.5) * L]]), a)
+              for i in range(rows)]  # fmt: skip
+    res = run_case(
+        s, lambda s_, lat: np.zeros((lat.nx, lat.ny, lat.n_fabric), np.float32), tmp_path,
+        record_flow_rate=True,
+        resistance=lambda s_, lat: subgrid_resistance(line_fraction(chains, s_, lat), a,
+                                                      "drummond_tahir"),
+    )  # fmt: skip
+    assert flow_rate_convergence(res.history_q_bottom_m3_s, 100, 1e-4).converged
+    u_s = res.q_bottom_m3_s / (L * L)
+    lat = make_lattice(s)
+    k1 = lat.n_below + 1  # second and fifth row: away from the ends of the porous zone
+    p1, p2 = float(res.p[0, 0, k1]), float(res.p[0, 0, k1 + 3])
+    k = s.viscosity_Pa_s * u_s * 3 * L / (p2 - p1) / a**2
+    k_total = s.viscosity_Pa_s * u_s * rows * L / s.delta_p_Pa / a**2
+    print(f"\nsub-grid square array phi {phi}: k/a^2 from the whole drop {k_total:.5f}")
+    print(f"\nsub-grid square array phi {phi}: k/a^2 {k:.5f}, Drummond-Tahir "
+          f"{drummond_tahir(phi):.5f}, error {k / drummond_tahir(phi) - 1:+.4f}")
+    assert res.imbalance < 0.005
+    assert k == pytest.approx(drummond_tahir(phi), rel=0.03)
+
+
 # ---- system: the stage through the CLI -------------------------------------------------------
 
 
@@ -195,8 +235,7 @@ fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3, voxel_size_m: 10.0e-6}
 fibers: {count: 8, length_m: 0.9e-3, width_m: 40.0e-6, segments: 3,
          youngs_modulus_Pa: 1.0e+10, shear_modulus_Pa: 4.0e+9}
 laydown: {}
-permeability: {cells_across_fiber: 1, max_iterations: 1500, convergence_window: 100,
-               pressure_drop_Pa: 2.0}
+permeability: {MODE, max_iterations: 1500, convergence_window: 100, pressure_drop_Pa: 2.0}
 """
 
 
@@ -223,10 +262,11 @@ def _write_sheet(root: Path, n: int, top: float) -> None:
 
 @pytest.mark.system
 @needs_openfoam
-def test_sheet_permeability_decreases_as_fibers_are_added(tmp_path: Path) -> None:
+@pytest.mark.parametrize("mode", ["cells_across_fiber: 1", "mode: subgrid, subgrid_cell_size_m: 50.0e-6"])
+def test_sheet_permeability_decreases_as_fibers_are_added(tmp_path: Path, mode: str) -> None:
     from fiberform.products import read_fabric_image
 
-    (tmp_path / "s.yaml").write_text(SHEET)
+    (tmp_path / "s.yaml").write_text(SHEET.replace("MODE", mode))
     env = dict(os.environ, WM_PROJECT_DIR=os.environ.get("WM_PROJECT_DIR", "/usr/share/openfoam"))
     run = [sys.executable, "-m", "fiberform"]
     r = subprocess.run([*run, "fabric", "s.yaml"], cwd=tmp_path, env=env, capture_output=True,

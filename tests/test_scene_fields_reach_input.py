@@ -96,15 +96,17 @@ PERM_ALTERNATIVES: dict[str, object] = {
     "cells_across_fiber": 6, "subsamples": 3, "height_above_m": 0.4e-3,
     "max_cell_height_m": 1.0e-4, "max_cells": 3_000_000, "max_iterations": 500,
     "residual_tolerance": 1.0e-5, "convergence_window": 50, "convergence_tolerance": 1.0e-2,
-    "ranks": 2,
+    "ranks": 2, "mode": "subgrid", "subgrid_cell_size_m": 40.0e-6,
+    "subgrid_law": "drummond_tahir",
 }
-PERM_SINGLE_CHOICE = {"mode"}  # only "resolved" so far (the sub-grid mode is not implemented)
+PERM_SINGLE_CHOICE: set[str] = set()
+PERM_SUBGRID_ONLY = {"subgrid_cell_size_m", "subgrid_law"}
 
 
 def _perm_effect(perm_fields: dict[str, object]) -> tuple[object, ...]:
     """Everything a permeability section configures, from the stage's own functions: the box case,
     the solid sampling, the refusal limit and the convergence criterion."""
-    from fiberform.porous_media import flow_rate_convergence
+    from fiberform.porous_media import flow_rate_convergence, subgrid_resistance
     from fiberform.scene import PermeabilitySection
     from fiberform.stages.permeability import PermeabilityGeometry, case_setup
 
@@ -112,7 +114,9 @@ def _perm_effect(perm_fields: dict[str, object]) -> tuple[object, ...]:
     geo = PermeabilityGeometry(1.0e-3, 1.0e-3, 2.0e-3, 2.6e-3, 20.0e-6, ())
     history = 1.0 + 1.0e-3 * np.sin(np.arange(1000.0))  # an oscillating outflow
     conv = flow_rate_convergence(history, perm.convergence_window, perm.convergence_tolerance)
-    return case_setup(perm, geo), perm.subsamples, perm.max_cells, conv
+    law = (subgrid_resistance(np.array([0.1]), 10e-6, perm.subgrid_law).tolist()
+           if perm.mode == "subgrid" else None)  # fmt: skip
+    return case_setup(perm, geo), perm.subsamples, perm.max_cells, conv, law
 
 
 def test_every_permeability_field_has_an_alternative() -> None:
@@ -125,5 +129,6 @@ def test_every_permeability_field_has_an_alternative() -> None:
 
 @pytest.mark.parametrize("field", sorted(PERM_ALTERNATIVES))
 def test_permeability_field_changes_the_case(field: str) -> None:
-    assert _perm_effect({}) != _perm_effect({field: PERM_ALTERNATIVES[field]}), \
+    base: dict[str, object] = {"mode": "subgrid"} if field in PERM_SUBGRID_ONLY else {}
+    assert _perm_effect(base) != _perm_effect({**base, field: PERM_ALTERNATIVES[field]}), \
         f"permeability.{field} does not reach the case"

@@ -630,9 +630,20 @@ class PermeabilitySection(_Section):
         "Pressure drop from the top to the bottom of the domain (125 Pa: ASTM D737)", "Pa",
         default=125.0, gt=0.0, le=1.0e5,
     )  # fmt: skip
-    mode: Literal["resolved"] = choice(
-        "How the solid enters the flow: resolved (cells removed where fibers and yarns are; the "
-        "sub-grid mode of issue 12 is not implemented yet)", default="resolved",
+    mode: Literal["resolved", "subgrid"] = choice(
+        "How the fibers enter the flow: resolved (cells removed where fibers and yarns are, cells "
+        "of thinnest fiber / cells_across_fiber) or subgrid (cells of subgrid_cell_size_m; yarns "
+        "removed, fibers as a Darcy resistance from the fiber volume fraction of each cell)",
+        default="resolved",
+    )
+    subgrid_cell_size_m: float = quantity(
+        "Cell size of the solid zone in mode subgrid (at least the fiber width)", "m",
+        default=50e-6, ge=1e-6, le=1e-3,
+    )  # fmt: skip
+    subgrid_law: Literal["jackson_james", "drummond_tahir"] = choice(
+        "Permeability law of the fiber-filled cells in mode subgrid: jackson_james (random 3D "
+        "fiber networks, Jackson & James 1986) or drummond_tahir (square arrays, transverse flow, "
+        "Drummond & Tahir 1984)", default="jackson_james",
     )
     cells_across_fiber: int = quantity(
         "CFD cells across the thinnest fiber (bare fabric: across the thinnest yarn); sets the "
@@ -677,6 +688,13 @@ class PermeabilitySection(_Section):
 
     @model_validator(mode="after")
     def _check(self) -> PermeabilitySection:
+        if self.mode == "resolved":
+            for name in ("subgrid_cell_size_m", "subgrid_law"):
+                if name in self.model_fields_set:
+                    raise scene_problem(name, "only used with mode subgrid", getattr(self, name))
+        elif "cells_across_fiber" in self.model_fields_set:
+            raise scene_problem("cells_across_fiber", "only used with mode resolved (subgrid: "
+                                "subgrid_cell_size_m)", self.cells_across_fiber)
         if self.convergence_window > self.max_iterations:
             raise scene_problem("convergence_window", "must not exceed max_iterations "
                                 f"= {self.max_iterations!r}", self.convergence_window)

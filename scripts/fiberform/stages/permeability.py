@@ -38,11 +38,15 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError, StageError
+from ..fabric_geometry import VoxelImage
 from ..openfoam_case import (
-    BoxSetup, CaseResult, Lattice, make_lattice, plot_section, run_case, template_hash,
-    write_solver_record,
+    BoxSetup, CaseResult, Lattice, SolidFraction, make_lattice, plot_section, run_case,
+    template_hash, write_solver_record,
 )  # fmt: skip
-from ..porous_media import CFM_M_S, Convergence, capsule_fraction, flow_rate_convergence, image_fraction
+from ..porous_media import (
+    CFM_M_S, Convergence, capsule_fraction, flow_rate_convergence, image_fraction,
+    line_fraction, subgrid_resistance,
+)  # fmt: skip
 from ..products import (
     FABRIC_H5, FIBERS_H5, LAYDOWN_H5, Chain, read_fabric_image, read_sheet_chains,
     read_yarn_chains,
@@ -51,7 +55,10 @@ from ..provenance import file_hash, write_dataset
 from ..scene import PermeabilitySection, Scene
 from ._stage import Stage, StageContext
 
-__all__ = ["PermeabilityGeometry", "PermeabilityStage", "case_setup", "darcy_permeability"]
+__all__ = [
+    "PermeabilityGeometry", "PermeabilityStage", "case_setup", "darcy_permeability",
+    "fiber_resistance", "solid_fraction",
+]
 
 H5_NAME, REPORT_NAME, PNG_NAME = "permeability.h5", "report.md", "permeability.png"
 
@@ -67,9 +74,13 @@ class PermeabilityGeometry:
     lower_z_m: float  # fabric lower side
     upper_z_m: float  # highest solid point (fabric or sheet)
     thinnest_m: float  # diameter of the thinnest fiber (or yarn; or the voxel size)
-    chains: tuple[Chain, ...]
+    yarns: tuple[Chain, ...]
+    fiber_chains: tuple[Chain, ...] = ()
     image: object | None = None  # VoxelImage of an imported fabric (no yarn chains)
-    fibers: int = 0
+
+    @property
+    def fibers(self) -> int:
+        return len(self.fiber_chains)
 
 
 def darcy_permeability(u_s_m_s: float, mu_Pa_s: float, thickness_m: float, dp_Pa: float) -> float:
@@ -78,8 +89,12 @@ def darcy_permeability(u_s_m_s: float, mu_Pa_s: float, thickness_m: float, dp_Pa
 
 
 def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup:
-    """The box case of a permeability run: cells of thinnest / cells_across_fiber in the zone."""
-    h = geo.thinnest_m / perm.cells_across_fiber
+    """The box case of a permeability run: zone cells of thinnest / cells_across_fiber (resolved)
+    or subgrid_cell_size_m (subgrid)."""
+    if perm.mode == "subgrid":
+        h = perm.subgrid_cell_size_m
+    else:
+        h = geo.thinnest_m / perm.cells_across_fiber
     return BoxSetup(
         size_x_m=geo.size_x_m,
         size_y_m=geo.size_y_m,
@@ -97,16 +112,33 @@ def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup
     )
 
 
-def solid_fraction(geo: PermeabilityGeometry, subsamples: int):  # type: ignore[no-untyped-def]
-    """The :data:`~fiberform.openfoam_case.SolidFraction` callback of the geometry."""
+def solid_fraction(geo: PermeabilityGeometry, perm: PermeabilitySection) -> SolidFraction:
+    """The cells' solid fraction: yarns (or the voxel image) and, in mode resolved, the fibers."""
+    chains = list(geo.yarns) + (list(geo.fiber_chains) if perm.mode == "resolved" else [])
 
     def frac(s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float32]:
-        out = capsule_fraction([(c.points, c.radius) for c in geo.chains], s, lat, subsamples)
+        out = capsule_fraction([(c.points, c.radius) for c in chains], s, lat, perm.subsamples)
         if geo.image is not None:
-            out = np.maximum(out, image_fraction(geo.image, s, lat, subsamples))  # type: ignore[arg-type]
+            img = geo.image
+            assert isinstance(img, VoxelImage)
+            out = np.maximum(out, image_fraction(img, s, lat, perm.subsamples))
         return out
 
     return frac
+
+
+def fiber_resistance(geo: PermeabilityGeometry, perm: PermeabilitySection) -> SolidFraction | None:
+    """Mode subgrid: Darcy resistance 1/k of each cell from its fiber volume fraction and the
+    law ``subgrid_law`` (fiber radius: the thinnest fiber's); None in mode resolved."""
+    if perm.mode != "subgrid" or not geo.fiber_chains:
+        return None
+    chains = [(c.points, c.radius) for c in geo.fiber_chains]
+
+    def resistance(s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float64]:
+        phi = line_fraction(chains, s, lat)
+        return subgrid_resistance(phi, 0.5 * geo.thinnest_m, perm.subgrid_law)
+
+    return resistance
 
 
 def _expected_cells(scene: Scene) -> tuple[float, float]:
@@ -119,7 +151,7 @@ def _expected_cells(scene: Scene) -> tuple[float, float]:
         thinnest = scene.fibers.width_m
     if fab.source != "generate":
         thinnest = fab.voxel_size_m
-    h = thinnest / perm.cells_across_fiber
+    h = perm.subgrid_cell_size_m if perm.mode == "subgrid" else thinnest / perm.cells_across_fiber
     return h, (fab.size_x_m / h) * (fab.size_y_m / h) * (thick / h)
 
 
@@ -149,11 +181,19 @@ class PermeabilityStage(Stage):
                     "fiber sections only so far (allowed: circular)"
                 )
         h, cells = _expected_cells(scene)
+        field = "subgrid_cell_size_m" if perm.mode == "subgrid" else "cells_across_fiber"
+        if (perm.mode == "subgrid" and scene.laydown is not None and scene.fibers is not None
+                and perm.subgrid_cell_size_m < scene.fibers.width_m):
+            problems.append(
+                f"permeability.subgrid_cell_size_m = {perm.subgrid_cell_size_m!r}: smaller than "
+                f"the fiber width ({scene.fibers.width_m!r} m); the sub-grid laws need cells at "
+                "least one fiber wide (use mode resolved for finer cells)"
+            )
         if cells > perm.max_cells:
             problems.append(
-                f"permeability.cells_across_fiber = {perm.cells_across_fiber!r}: cells of "
+                f"permeability.{field} = {getattr(perm, field)!r}: cells of "
                 f"{h:.3g} m give about {cells:.3g} cells in the fabric zone alone (limit "
-                f"permeability.max_cells = {perm.max_cells!r}); lower cells_across_fiber"
+                f"permeability.max_cells = {perm.max_cells!r})"
             )
         return problems
 
@@ -203,9 +243,9 @@ class PermeabilityStage(Stage):
             lower_z_m=float(img.origin[2]),
             upper_z_m=top,
             thinnest_m=thinnest,
-            chains=tuple(yarns + fibers),
+            yarns=tuple(yarns),
+            fiber_chains=tuple(fibers),
             image=None if yarns else img,
-            fibers=len(fibers),
         )
 
     def produce(
@@ -218,13 +258,15 @@ class PermeabilityStage(Stage):
         lat = make_lattice(s)
         if lat.cells > perm.max_cells:
             raise StageError(
-                f"permeability.cells_across_fiber = {perm.cells_across_fiber}: the lattice has "
-                f"{lat.cells} cells (limit permeability.max_cells = {perm.max_cells})"
+                f"permeability: the lattice has {lat.cells} cells of {s.cell_size_m:.3g} m (limit "
+                f"permeability.max_cells = {perm.max_cells}); lower cells_across_fiber or raise "
+                "subgrid_cell_size_m"
             )
         start = time.monotonic()
         res = run_case(
-            s, solid_fraction(geo, perm.subsamples), self.stage_dir(ctx), record_flow_rate=True,
-            preserve_volume=True, oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
+            s, solid_fraction(geo, perm), self.stage_dir(ctx), record_flow_rate=True,
+            preserve_volume=True, resistance=fiber_resistance(geo, perm),
+            oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
         )  # fmt: skip
         wall = time.monotonic() - start
         conv = flow_rate_convergence(res.history_q_bottom_m3_s, perm.convergence_window,
@@ -321,8 +363,12 @@ def report_lines(
         f"{res.iterations} iterations, residual criterion {s.residual_tolerance:g} "
         f"{'met' if res.converged else 'not met'}",
         f"- mass conservation: |inflow - outflow| / outflow = {res.imbalance:.2e}",
+        (f"- sub-grid: fibers as a Darcy resistance 1/k(phi) per cell, k from {perm.subgrid_law} "
+         f"(fiber radius {geo.thinnest_m * 0.5e6:.3g} um), yarns removed"
+         if perm.mode == "subgrid" else "- resolved: fibers and yarns removed from the mesh"),
         f"- mesh (mode {perm.mode}): cells of {s.cell_size_m * 1e6:.3g} um "
-        f"({perm.cells_across_fiber} across the thinnest fiber/yarn of {geo.thinnest_m * 1e6:.3g} um), "
+        f"({geo.thinnest_m / s.cell_size_m:.3g} across the thinnest fiber/yarn of "
+        f"{geo.thinnest_m * 1e6:.3g} um), "
         f"{res.fluid_cells} fluid cells of {res.lattice_cells} lattice cells",
         f"- air: density {s.density_kg_m3:g} kg/m^3, viscosity {s.viscosity_Pa_s:g} Pa s",
         f"- wall time {wall_s:.1f} s on {s.ranks} rank(s)", "",
