@@ -209,8 +209,8 @@ SUBGRID_PHI_MIN = 1e-4
 def jackson_james(phi: FloatArray, a: float) -> FloatArray:
     """Permeability [m^2] of a random 3D network of fibers of radius ``a`` at volume fraction phi:
     Jackson & James (1986), Can. J. Chem. Eng. 64, 364-374, k / a^2 = 3 / (20 phi) (-ln phi -
-    0.931); the authors give it for phi up to about 0.3 (within a factor of about 2 of their data
-    compilation at low phi)."""
+    0.931), for phi up to about 0.3 (its accuracy against real fibrous media is not measured
+    here)."""
     phi = np.asarray(phi, dtype=np.float64)
     return np.asarray(3.0 * a * a / (20.0 * phi) * (-np.log(phi) - 0.931))
 
@@ -218,8 +218,8 @@ def jackson_james(phi: FloatArray, a: float) -> FloatArray:
 def drummond_tahir(phi: FloatArray, a: float) -> FloatArray:
     """Permeability [m^2] of a square array of cylinders of radius ``a`` in transverse flow:
     Drummond & Tahir (1984), Int. J. Multiphase Flow 10, 515-540, k / a^2 = (-ln phi - 1.476 +
-    2 phi - 1.774 phi^2 + 4.078 phi^3) / (8 phi) (dilute expansion; within about 1 % of the exact
-    values up to phi of about 0.3)."""
+    2 phi - 1.774 phi^2 + 4.078 phi^3) / (8 phi) (an expansion for small phi; the tests use it at
+    0.05 and 0.1)."""
     phi = np.asarray(phi, dtype=np.float64)
     return np.asarray(a * a * (-np.log(phi) - 1.476 + 2 * phi - 1.774 * phi**2
                                + 4.078 * phi**3) / (8.0 * phi))  # fmt: skip

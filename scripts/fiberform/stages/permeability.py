@@ -12,7 +12,10 @@ thinnest fiber diameter, or the thinnest yarn for a bare fabric); each zone cell
 of its ``subsamples``^3 sample points inside a fiber or yarn (capsule chains: the yarns of the
 generated fabric and the sheet's fibers; imported fabrics through their voxel image), and the cells
 with the largest fractions are removed until the removed volume equals the sampled solid volume
-(:func:`fiberform.openfoam_case.volume_preserving`).
+(:func:`fiberform.openfoam_case.volume_preserving`). Mode ``subgrid``: cells of
+``subgrid_cell_size_m``; yarns removed as above, fibers as a Darcy resistance 1/k(phi) per cell from
+the cell's fiber volume fraction and ``subgrid_law`` (Jackson & James 1986 or Drummond & Tahir 1984;
+:mod:`fiberform.porous_media`), applied through OpenFOAM's explicitPorositySource.
 
 Convergence (thesis sec. 5.2: the permeability "oscillates"): simpleFoam stops when the initial
 residuals of p and U fall below ``residual_tolerance`` or at ``max_iterations``; the outflow through
