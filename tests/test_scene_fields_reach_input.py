@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -86,3 +87,48 @@ def test_field_changes_the_generated_input(section: str, field: str) -> None:
             f"{section}.{field} does not reach the fiberdem launch"
         return
     assert render() != render(section, field), f"{section}.{field} does not reach the input"
+
+
+# ---- permeability (issue 12): every field reaches the box case, the run options or the output --
+
+PERM_ALTERNATIVES: dict[str, object] = {
+    "density_kg_m3": 1.1, "viscosity_Pa_s": 1.9e-5, "pressure_drop_Pa": 200.0,
+    "cells_across_fiber": 6, "subsamples": 3, "height_above_m": 0.4e-3,
+    "max_cell_height_m": 1.0e-4, "max_cells": 3_000_000, "max_iterations": 500,
+    "residual_tolerance": 1.0e-5, "convergence_window": 50, "convergence_tolerance": 1.0e-2,
+    "ranks": 2, "mode": "subgrid", "subgrid_cell_size_m": 40.0e-6,
+    "subgrid_law": "drummond_tahir",
+}
+PERM_SINGLE_CHOICE: set[str] = set()
+PERM_SUBGRID_ONLY = {"subgrid_cell_size_m", "subgrid_law"}
+
+
+def _perm_effect(perm_fields: dict[str, object]) -> tuple[object, ...]:
+    """Everything a permeability section configures, from the stage's own functions: the box case,
+    the solid sampling, the refusal limit and the convergence criterion."""
+    from fiberform.porous_media import flow_rate_convergence, subgrid_resistance
+    from fiberform.scene import PermeabilitySection
+    from fiberform.stages.permeability import PermeabilityGeometry, case_setup
+
+    perm = PermeabilitySection.model_validate(perm_fields)
+    geo = PermeabilityGeometry(1.0e-3, 1.0e-3, 2.0e-3, 2.6e-3, 20.0e-6, ())
+    history = 1.0 + 1.0e-3 * np.sin(np.arange(1000.0))  # an oscillating outflow
+    conv = flow_rate_convergence(history, perm.convergence_window, perm.convergence_tolerance)
+    law = (subgrid_resistance(np.array([0.1]), 10e-6, perm.subgrid_law).tolist()
+           if perm.mode == "subgrid" else None)  # fmt: skip
+    return case_setup(perm, geo), perm.subsamples, perm.max_cells, conv, law
+
+
+def test_every_permeability_field_has_an_alternative() -> None:
+    from fiberform.scene import PermeabilitySection
+
+    missing = [f for f in PermeabilitySection.model_fields
+               if f not in PERM_ALTERNATIVES and f not in PERM_SINGLE_CHOICE]
+    assert not missing, f"add an alternative value for: {missing}"
+
+
+@pytest.mark.parametrize("field", sorted(PERM_ALTERNATIVES))
+def test_permeability_field_changes_the_case(field: str) -> None:
+    base: dict[str, object] = {"mode": "subgrid"} if field in PERM_SUBGRID_ONLY else {}
+    assert _perm_effect(base) != _perm_effect({**base, field: PERM_ALTERNATIVES[field]}), \
+        f"permeability.{field} does not reach the case"

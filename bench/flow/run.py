@@ -25,10 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
+from fiberform.openfoam_case import make_lattice
 from fiberform.provenance import machine_info
 from fiberform.scene import FabricSection, FlowSection, FluidSection
 from fiberform.stages.fabric import make_fabric
-from fiberform.stages.flow import FlowSetup, make_lattice, run_flow_case
+from fiberform.stages.flow import FlowSetup, run_flow_case
 
 HERE = Path(__file__).resolve().parent
 

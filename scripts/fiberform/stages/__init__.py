@@ -11,6 +11,7 @@ from ._stage import Outcome, Stage, StageContext
 from .fabric import FabricStage
 from .flow import FlowStage
 from .particles import DemoParticles
+from .permeability import PermeabilityStage
 from .generate import Generate
 from .laydown import Laydown
 
@@ -18,7 +19,7 @@ __all__ = ["STAGES", "Outcome", "Stage", "StageContext", "stage"]
 
 #: Every stage by CLI name, in pipeline order.
 STAGES: dict[str, Stage] = {s.name: s for s in (DemoParticles(), Generate(), FabricStage(), FlowStage(),
-                                               Laydown())}
+                                               Laydown(), PermeabilityStage())}
 
 
 def stage(name: str) -> Stage:

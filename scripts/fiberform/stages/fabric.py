@@ -46,6 +46,7 @@ from ..fabric_geometry import (
     warp_crimp,
     write_stl,
 )
+from ..products import read_fabric_image
 from ..provenance import file_hash, write_dataset
 from ..scene import FabricSection, Scene
 from ._stage import Stage, StageContext
@@ -328,21 +329,6 @@ def write_png(path: Path, res: FabricResult, title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
-
-
-def read_fabric_image(path: Path) -> VoxelImage:
-    """The voxel image of a ``fabric.h5``."""
-    with h5py.File(path, "r") as f:
-        ds = f["voxels/solid"]
-        return VoxelImage(
-            np.asarray(ds[...]) != 0,
-            np.asarray(ds.attrs["origin_m"], dtype=np.float64),
-            np.asarray(ds.attrs["voxel_size_m"], dtype=np.float64),
-            {
-                k: (v.item() if isinstance(v, np.generic) else v)
-                for k, v in f["properties"].attrs.items()
-            },
-        )
 
 
 def read_yarns(path: Path) -> list[Yarn]:

@@ -29,23 +29,23 @@ Docs: docs/stages/flow.md.
 from __future__ import annotations
 
 import math
-import re
-import shutil
 import struct
 import time
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
 import numpy as np
 import numpy.typing as npt
 
-from .._versions import repo_root
 from ..errors import StageError
 from ..fabric_geometry import VoxelImage
-from ..provenance import file_hash, text_hash, write_dataset
-from ..runner import openfoam_progress, run
+from ..openfoam_case import (
+    BoxSetup, CaseResult, plot_section, run_case, template_hash, voxel_fraction,
+    write_solver_record,
+)  # fmt: skip
+from ..provenance import file_hash, write_dataset
 from ..scene import FlowSection, FluidSection, Scene
 from ._stage import Stage, StageContext
 from .fabric import FabricStage, read_fabric_image
@@ -54,42 +54,22 @@ __all__ = [
     "FlowResult",
     "FlowSetup",
     "FlowStage",
-    "geometric_cells",
     "read_flow_grid",
     "run_flow_case",
     "write_flow_grid",
 ]
 
 H5_NAME, GRID_NAME, PNG_NAME = "flow.h5", "flow.grid", "flow.png"
-CASE_DIR = "case"
-TEMPLATE = "fabric-flow"
-#: Largest growth ratio of neighbouring cell heights in the graded blocks.
-MAX_GROWTH = 1.2
 
 FloatArray = npt.NDArray[np.float64]
-
-
-def template_dir() -> Path:
-    return repo_root() / "openfoam-cases" / TEMPLATE
+#: The result of one flow run (the shared case runner's result).
+FlowResult = CaseResult
 
 
 @dataclass(frozen=True)
-class FlowSetup:
-    """Numbers that define one flow run (SI units)."""
+class FlowSetup(BoxSetup):
+    """Numbers that define one flow run (SI units): the box case plus the output grid spacing."""
 
-    size_x_m: float
-    size_y_m: float
-    fabric_lo_z_m: float
-    fabric_hi_z_m: float
-    top_z_m: float
-    cell_size_m: float
-    max_cell_height_m: float
-    delta_p_Pa: float
-    density_kg_m3: float
-    viscosity_Pa_s: float
-    max_iterations: int = 3000
-    residual_tolerance: float = 1e-6
-    ranks: int = 1
     sample_spacing_m: float | None = None
 
     @classmethod
@@ -113,325 +93,19 @@ class FlowSetup:
         )
 
 
-def geometric_cells(length: float, first: float, largest: float) -> tuple[int, float]:
-    """Cells for a block of ``length`` whose first cell is ``first`` high and whose heights grow
-    geometrically (ratio <= MAX_GROWTH) up to at most ``largest``. Returns (n, last/first)."""
-    if length <= 0:
-        raise ValueError("block length must be > 0")
-    if length <= first * (1 + MAX_GROWTH) or largest <= first:
-        return max(1, round(length / first)), 1.0
-    for n in range(2, 100000):
-        if n * first >= length:
-            return n, 1.0  # uniform cells slightly smaller than `first`
-        s_max = first * (MAX_GROWTH**n - 1) / (MAX_GROWTH - 1)
-        if s_max < length:
-            continue
-        lo, hi = 1.0, MAX_GROWTH
-        for _ in range(200):
-            q = 0.5 * (lo + hi)
-            if first * (q**n - 1) / (q - 1) < length:
-                lo = q
-            else:
-                hi = q
-        q = 0.5 * (lo + hi)
-        if first * q ** (n - 1) <= largest * (1 + 1e-9):
-            return n, q ** (n - 1)
-    raise ValueError("no grading found")
-
-
-@dataclass
-class Lattice:
-    """The blockMesh lattice: cell counts and z layout of the three blocks."""
-
-    nx: int
-    ny: int
-    n_below: int
-    n_fabric: int
-    n_above: int
-    grading_below: float  # blockMesh expansion ratio (last/first cell along +z)
-    grading_above: float
-
-    @property
-    def nz(self) -> int:
-        return self.n_below + self.n_fabric + self.n_above
-
-    @property
-    def cells(self) -> int:
-        return self.nx * self.ny * self.nz
-
-
-def make_lattice(s: FlowSetup) -> Lattice:
-    h = s.cell_size_m
-    nx = max(1, round(s.size_x_m / h))
-    ny = max(1, round(s.size_y_m / h))
-    nf = max(1, round((s.fabric_hi_z_m - s.fabric_lo_z_m) / h))
-    hz = (s.fabric_hi_z_m - s.fabric_lo_z_m) / nf
-    nb, eb = geometric_cells(s.fabric_lo_z_m, hz, s.max_cell_height_m)
-    na, ea = geometric_cells(s.top_z_m - s.fabric_hi_z_m, hz, s.max_cell_height_m)
-    return Lattice(nx, ny, nb, nf, na, 1.0 / eb, ea)
-
-
-@dataclass
-class FlowResult:
-    lattice_x: FloatArray
-    lattice_y: FloatArray
-    lattice_z: FloatArray
-    U: npt.NDArray[np.float64]  # (nx, ny, nz, 3) on the lattice, 0 in removed cells
-    p: npt.NDArray[np.float64]  # (nx, ny, nz) Pa, NaN in removed cells
-    fluid: npt.NDArray[np.bool_]
-    solid_fraction: npt.NDArray[np.float32]
-    q_top_m3_s: float
-    q_bottom_m3_s: float
-    iterations: int
-    converged: bool
-    fluid_cells: int
-    lattice_cells: int
-    wall_times_s: dict[str, float]
-    final_residuals: dict[str, float]
-
-    @property
-    def imbalance(self) -> float:
-        return abs(self.q_top_m3_s - self.q_bottom_m3_s) / max(abs(self.q_bottom_m3_s), 1e-300)
-
-
-# --------------------------------------------------------------------------------------------
-# Case set-up through foamlib
-
-
-def _write_block_mesh(case: Path, s: FlowSetup, lat: Lattice) -> None:
-    from foamlib import FoamFile
-
-    zs = [0.0, s.fabric_lo_z_m, s.fabric_hi_z_m, s.top_z_m]
-    lx, ly = s.size_x_m, s.size_y_m
-    verts = [[x, y, z] for z in zs for (x, y) in ((0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly))]
-    blocks: list[object] = []
-    for b, (nz, grading) in enumerate(
-        ((lat.n_below, lat.grading_below), (lat.n_fabric, 1.0), (lat.n_above, lat.grading_above))
-    ):
-        v = [4 * b + i for i in range(8)]
-        blocks += ["hex", v, [lat.nx, lat.ny, nz], "simpleGrading", [1, 1, float(grading)]]
-    with FoamFile(case / "system" / "blockMeshDict") as f:
-        f["scale"] = 1
-        f["vertices"] = verts
-        f["blocks"] = blocks
-
-
-def _write_solid_field(case: Path, frac: FloatArray) -> None:
-    from foamlib import FoamFieldFile
-
-    f = FoamFieldFile(case / "0" / "solid")
-    f.dimensions = [0, 0, 0, 0, 0, 0, 0]
-    f.internal_field = np.asarray(frac, dtype=np.float64)
-    f.boundary_field = {
-        "top": {"type": "zeroGradient"},
-        "bottom": {"type": "zeroGradient"},
-        "sides": {"type": "symmetry"},
-        "yarns": {"type": "zeroGradient"},
-    }
-
-
-def _reset_fields(case: Path, s: FlowSetup) -> None:
-    from foamlib import FoamFieldFile
-
-    zero = case / "0"
-    shutil.rmtree(zero, ignore_errors=True)
-    shutil.copytree(case / "0.orig", zero)
-    with FoamFieldFile(zero / "p") as p:
-        p.boundary_field["top"]["value"] = s.delta_p_Pa / s.density_kg_m3
-
-
-def _set_controls(case: Path, s: FlowSetup, lat: Lattice) -> None:
-    from foamlib import FoamFile
-
-    with FoamFile(case / "system" / "controlDict") as c:
-        c["endTime"] = int(s.max_iterations)
-        c["writeInterval"] = int(s.max_iterations)
-        c["writeFormat"] = "ascii"
-    with FoamFile(case / "system" / "fvSolution") as f:
-        f["SIMPLE"]["residualControl"]["p"] = float(s.residual_tolerance)
-        f["SIMPLE"]["residualControl"]["U"] = float(s.residual_tolerance)
-    with FoamFile(case / "constant" / "transportProperties") as t:
-        t["nu"] = s.viscosity_Pa_s / s.density_kg_m3
-    with FoamFile(case / "system" / "decomposeParDict") as d:
-        d["numberOfSubdomains"] = int(s.ranks)
-        d["coeffs"]["n"] = [int(s.ranks), 1, 1]
-    # A point inside the topmost layer of cells, away from faces: seed of the connected fluid.
-    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
-    seed = [(lat.nx // 2 + 0.5) * hx, (lat.ny // 2 + 0.5) * hy, s.top_z_m - 0.25 * s.cell_size_m]
-    with FoamFile(case / "system" / "topoSetDict") as t:
-        actions = t["actions"]
-        actions[1]["insidePoints"] = [seed]
-        t["actions"] = actions
-
-
-def _read_internal(path: Path) -> npt.NDArray[np.float64]:
-    from foamlib import FoamFieldFile
-
-    return np.asarray(FoamFieldFile(path).internal_field, dtype=np.float64)
-
-
-def _patch_sum(path: Path, patch: str) -> float:
-    from foamlib import FoamFieldFile
-
-    val = FoamFieldFile(path).boundary_field[patch]["value"]
-    return float(np.sum(np.asarray(val, dtype=np.float64)))
-
-
-def _solid_fraction(img: VoxelImage, s: FlowSetup, lat: Lattice) -> npt.NDArray[np.float32]:
-    """Solid volume fraction of each fabric-zone lattice cell, from the voxels whose centres it
-    holds. Shape (nx, ny, n_fabric)."""
-    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
-    hz = (s.fabric_hi_z_m - s.fabric_lo_z_m) / lat.n_fabric
-    ix = np.clip(np.floor((img.centres(0) - 0.0) / hx).astype(np.int64), 0, lat.nx - 1)
-    iy = np.clip(np.floor((img.centres(1) - 0.0) / hy).astype(np.int64), 0, lat.ny - 1)
-    iz = np.clip(np.floor((img.centres(2) - s.fabric_lo_z_m) / hz).astype(np.int64), 0, lat.n_fabric - 1)
-    flat = (ix[:, None, None] * lat.ny + iy[None, :, None]) * lat.n_fabric + iz[None, None, :]
-    n = lat.nx * lat.ny * lat.n_fabric
-    total = np.bincount(flat.ravel(), minlength=n).astype(np.float64)
-    solid = np.bincount(flat.ravel(), weights=img.solid.ravel().astype(np.float64), minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        frac = np.where(total > 0, solid / np.maximum(total, 1), 0.0)
-    return frac.reshape(lat.nx, lat.ny, lat.n_fabric).astype(np.float32)
-
-
-def _layers(z: FloatArray, tol: float) -> FloatArray:
-    """Distinct heights of cell centres (values closer than ``tol`` are one layer)."""
-    zs = np.sort(z)
-    starts = np.concatenate([[0], np.nonzero(np.diff(zs) > tol)[0] + 1])
-    return np.asarray(np.add.reduceat(zs, starts) / np.diff(np.append(starts, len(zs))))
-
-
-def _nearest_layer(centres: FloatArray, z: FloatArray, tol: float) -> npt.NDArray[np.int64]:
-    k = np.clip(np.searchsorted(centres, z), 1, len(centres) - 1) if len(centres) > 1 else np.zeros(len(z), dtype=np.int64)
-    if len(centres) > 1:
-        k = np.where(np.abs(centres[k - 1] - z) < np.abs(centres[k] - z), k - 1, k)
-    if np.any(np.abs(centres[k] - z) > tol):
-        raise StageError("cell centres do not lie on the blockMesh lattice")
-    return np.asarray(k, dtype=np.int64)
-
-
-_CONVERGED = re.compile(r"SIMPLE solution converged in (\d+) iterations")
-_TIME = re.compile(r"^Time = (\d+)\s*$", re.MULTILINE)
-_RESIDUAL = re.compile(r"Solving for (Ux|Uy|Uz|p), Initial residual = ([0-9.eE+-]+)")
-
-
 def run_flow_case(
-    s: FlowSetup,
+    s: BoxSetup,
     img: VoxelImage,
     work: Path,
     *,
     oversubscribe: bool = False,
     show_progress: bool | None = None,
 ) -> FlowResult:
-    """Mesh, solve and read back one flow case in ``work`` (``work/case`` is replaced)."""
-    lat = make_lattice(s)
-    work = work.resolve()
-    case = work / CASE_DIR
-    shutil.rmtree(case, ignore_errors=True)
-    shutil.copytree(template_dir(), case)
-    (case / "0").mkdir(exist_ok=True)
-    for f in (case / "0.orig").iterdir():
-        shutil.copy(f, case / "0" / f.name)
-    _write_block_mesh(case, s, lat)
-    _set_controls(case, s, lat)
-    times: dict[str, float] = {}
-
-    def tool(cmd: list[str], name: str, ranks: int = 1, progress: object = None) -> None:
-        res = run(
-            cmd, work / f"log.{name}", cwd=case, ranks=ranks, progress=progress,  # type: ignore[arg-type]
-            oversubscribe=oversubscribe, description=name, show_progress=show_progress,
-        )  # fmt: skip
-        times[name] = res.elapsed_s
-
-    tool(["blockMesh"], "blockMesh")
-    tool(["postProcess", "-func", "writeCellCentres", "-time", "0"], "writeCellCentres")
-    C = _read_internal(case / "0" / "C").reshape(-1, 3)
-    if len(C) != lat.cells:
-        raise StageError(f"blockMesh made {len(C)} cells, expected {lat.cells}")
-    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
-    ci = np.clip(np.floor(C[:, 0] / hx).astype(np.int64), 0, lat.nx - 1)
-    cj = np.clip(np.floor(C[:, 1] / hy).astype(np.int64), 0, lat.ny - 1)
-    tol = 1e-3 * s.cell_size_m
-    z_centres = _layers(C[:, 2], tol)
-    if len(z_centres) != lat.nz:
-        raise StageError(f"found {len(z_centres)} cell layers, expected {lat.nz}")
-    ck = _nearest_layer(z_centres, C[:, 2], tol)
-    frac_f = _solid_fraction(img, s, lat)
-    frac = np.zeros((lat.nx, lat.ny, lat.nz), dtype=np.float32)
-    frac[:, :, lat.n_below : lat.n_below + lat.n_fabric] = frac_f
-    _write_solid_field(case, frac[ci, cj, ck])
-    tool(["topoSet"], "topoSet")
-    tool(["subsetMesh", "fluid", "-patch", "yarns", "-overwrite"], "subsetMesh")
-    # subsetMesh also subset the cell-centre field: the centres of the kept cells, in the new
-    # mesh's order, locate each fluid cell on the lattice.
-    Cf = _read_internal(case / "0" / "C").reshape(-1, 3)
-    fi = np.clip(np.floor(Cf[:, 0] / hx).astype(np.int64), 0, lat.nx - 1)
-    fj = np.clip(np.floor(Cf[:, 1] / hy).astype(np.int64), 0, lat.ny - 1)
-    fk = _nearest_layer(z_centres, Cf[:, 2], tol)
-    _reset_fields(case, s)
-    for stale in case.glob("processor*"):
-        shutil.rmtree(stale)
-    progress = openfoam_progress(0.0, float(s.max_iterations))
-    if s.ranks > 1:
-        tool(["decomposePar", "-force"], "decomposePar")
-        tool(["simpleFoam", "-parallel"], "simpleFoam", ranks=s.ranks, progress=progress)
-        tool(["reconstructPar", "-latestTime"], "reconstructPar")
-    else:
-        tool(["simpleFoam"], "simpleFoam", progress=progress)
-    log = (work / "log.simpleFoam").read_text(errors="replace")
-    m = _CONVERGED.search(log)
-    steps = [int(t) for t in _TIME.findall(log)]
-    iterations = int(m.group(1)) if m else (steps[-1] if steps else 0)
-    residuals: dict[str, float] = {}
-    for name, val in _RESIDUAL.findall(log):
-        residuals[name] = float(val)
-    times_dirs = sorted(
-        (d for d in case.iterdir() if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
-        key=lambda d: float(d.name),
-    )
-    if not times_dirs:
-        raise StageError(f"simpleFoam wrote no solution in {case}")
-    last = times_dirs[-1]
-    U = _read_internal(last / "U").reshape(-1, 3)
-    p = _read_internal(last / "p").ravel()
-    if p.size == 1:
-        p = np.full(len(Cf), float(p[0]))
-    if U.shape[0] == 1:
-        U = np.repeat(U, len(Cf), axis=0)
-    q_top = -_patch_sum(last / "phi", "top")
-    q_bottom = _patch_sum(last / "phi", "bottom")
-    Ul = np.zeros((lat.nx, lat.ny, lat.nz, 3))
-    pl = np.full((lat.nx, lat.ny, lat.nz), np.nan)
-    fluid = np.zeros((lat.nx, lat.ny, lat.nz), dtype=bool)
-    idx = (fi, fj, fk)
-    Ul[idx] = U
-    pl[idx] = p * s.density_kg_m3
-    fluid[idx] = True
-    return FlowResult(
-        lattice_x=(np.arange(lat.nx) + 0.5) * hx,
-        lattice_y=(np.arange(lat.ny) + 0.5) * hy,
-        lattice_z=z_centres,
-        U=Ul,
-        p=pl,
-        fluid=fluid,
-        solid_fraction=frac,
-        q_top_m3_s=q_top,
-        q_bottom_m3_s=q_bottom,
-        iterations=iterations,
-        converged=m is not None,
-        fluid_cells=int(len(Cf)),
-        lattice_cells=lat.cells,
-        wall_times_s=times,
-        final_residuals=residuals,
-    )
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+    """Mesh, solve and read back one flow case through the bare fabric ``img`` in ``work``."""
+    return run_case(
+        s, lambda s_, lat: voxel_fraction(img, s_, lat), work, oversubscribe=oversubscribe,
+        show_progress=show_progress,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------------
@@ -531,19 +205,7 @@ def write_flow_h5(h5: h5py.File, s: FlowSetup, res: FlowResult, grid: RegularGri
     write_dataset(fr, "superficial_velocity", res.q_bottom_m3_s / area, "m/s",
                   "bottom flow rate / piece area")  # fmt: skip
     write_dataset(fr, "delta_p", s.delta_p_Pa, "Pa", "pressure drop top - bottom")
-    sv = h5.create_group("solver")
-    sv.attrs["application"] = "simpleFoam (laminar, SIMPLEC)"
-    sv.attrs["iterations"] = res.iterations
-    sv.attrs["converged"] = res.converged
-    sv.attrs["lattice_cells"] = res.lattice_cells
-    sv.attrs["fluid_cells"] = res.fluid_cells
-    sv.attrs["ranks"] = s.ranks
-    for k, v in res.wall_times_s.items():
-        sv.attrs[f"wall_time_{k}_s"] = v
-    for k, v in res.final_residuals.items():
-        sv.attrs[f"final_initial_residual_{k}"] = v
-    for k, v in asdict(s).items():
-        sv.attrs[f"setup_{k}"] = v if v is not None else "none"
+    write_solver_record(h5.create_group("solver"), s, res)
 
 
 def write_png(path: Path, s: FlowSetup, res: FlowResult, title: str) -> None:
@@ -554,18 +216,8 @@ def write_png(path: Path, s: FlowSetup, res: FlowResult, title: str) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 5), gridspec_kw={"width_ratios": [1.4, 1]})
     j = len(res.lattice_y) // 2
-    w = np.where(res.fluid[:, j, :], -res.U[:, j, :, 2], np.nan)
-    zlo = s.fabric_lo_z_m - 0.5e-3
-    zhi = min(s.top_z_m, s.fabric_hi_z_m + 0.5e-3)
-    X, Z = np.meshgrid(res.lattice_x * 1e3, res.lattice_z * 1e3, indexing="ij")
+    pc = plot_section(axes[0], s, res, -res.U[:, j, :, 2], "downward velocity -U_z", 0.5e-3)
     ax = axes[0]
-    pc = ax.pcolormesh(X, Z, w, shading="nearest", cmap="viridis")
-    ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], np.nan, 1.0), shading="nearest", cmap="Greys", vmin=0, vmax=1.5)
-    ax.set_ylim(zlo * 1e3, zhi * 1e3)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("z [mm]")
-    ax.set_title(f"downward velocity -U_z at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: yarns)")
     fig.colorbar(pc, ax=ax, label="m/s", shrink=0.8)
     ax = axes[1]
     area = s.size_x_m * s.size_y_m
@@ -649,11 +301,7 @@ class FlowStage(Stage):
         hashes = super().input_hashes(ctx)
         fab = self._fabric_h5(ctx)
         hashes["fabric_h5"] = file_hash(fab) if fab.is_file() else "missing"
-        parts = []
-        for f in sorted(template_dir().rglob("*")):
-            if f.is_file():
-                parts.append(f"{f.relative_to(template_dir())}:{file_hash(f)}")
-        hashes["case_template"] = text_hash("\n".join(parts))
+        hashes["case_template"] = template_hash()
         return hashes
 
     def produce(

@@ -1,0 +1,599 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Steady flow through a box holding a solid layer, with stock OpenFOAM (shared by the stages
+``flow`` and ``permeability``).
+
+Domain: [0, Lx] x [0, Ly] x [0, H] with a solid zone [zone_lo, zone_hi] in z (the fabric, or the
+fabric plus the sheet's fibers). Boundary conditions of Kettil 2016 eq. 3.1-3.3: symmetry on the four
+vertical sides, kinematic pressure delta_p / rho at the top and 0 at the bottom with zero-gradient
+velocity there, no-slip on the solid (wall patch ``yarns``). Solver: stock ``simpleFoam``
+(laminar steady Navier-Stokes, SIMPLEC), optionally on several ranks through ``decomposePar``.
+
+Mesh: ``blockMesh`` builds a box of three blocks stacked in z; the zone has cubic cells of
+``cell_size_m``, the blocks above and below are graded geometrically up to ``max_cell_height_m``. The
+caller supplies the solid volume fraction of each zone cell (a :data:`SolidFraction` callback);
+``topoSet`` selects the cells with fraction < 1/2 that are face-connected to the top and
+``subsetMesh`` keeps only those, turning the exposed faces into the wall patch ``yarns`` (a
+"staircase" wall; the resolution trade is measured in docs/bench/flow.md and
+docs/stages/permeability.md).
+
+The case template is ``openfoam-cases/fabric-flow``; every value that changes is written through
+foamlib from validated numbers (no text from a scene reaches a case file).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ._versions import repo_root
+from .errors import StageError
+from .fabric_geometry import VoxelImage
+from .provenance import file_hash, text_hash
+from .runner import openfoam_progress, run
+
+__all__ = [
+    "CASE_DIR",
+    "BoxSetup",
+    "CaseResult",
+    "Lattice",
+    "SolidFraction",
+    "geometric_cells",
+    "make_lattice",
+    "run_case",
+    "template_dir",
+    "template_hash",
+    "volume_preserving",
+    "plot_section",
+    "voxel_fraction",
+    "write_solver_record",
+]
+
+CASE_DIR = "case"
+TEMPLATE = "fabric-flow"
+#: Largest growth ratio of neighbouring cell heights in the graded blocks.
+MAX_GROWTH = 1.2
+#: Name of the function object that records the outflow through ``bottom`` at every iteration.
+FLOW_RATE_FO = "flowRateBottom"
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def template_dir() -> Path:
+    return repo_root() / "openfoam-cases" / TEMPLATE
+
+
+def template_hash() -> str:
+    """Hash of every file of the case template (an input of the stages that use it)."""
+    parts = []
+    for f in sorted(template_dir().rglob("*")):
+        if f.is_file():
+            parts.append(f"{f.relative_to(template_dir())}:{file_hash(f)}")
+    return text_hash("\n".join(parts))
+
+
+@dataclass(frozen=True)
+class BoxSetup:
+    """Numbers that define one steady flow run (SI units)."""
+
+    size_x_m: float
+    size_y_m: float
+    fabric_lo_z_m: float  # lower end of the solid zone
+    fabric_hi_z_m: float  # upper end of the solid zone
+    top_z_m: float
+    cell_size_m: float
+    max_cell_height_m: float
+    delta_p_Pa: float
+    density_kg_m3: float
+    viscosity_Pa_s: float
+    max_iterations: int = 3000
+    residual_tolerance: float = 1e-6
+    ranks: int = 1
+
+
+def geometric_cells(length: float, first: float, largest: float) -> tuple[int, float]:
+    """Cells for a block of ``length`` whose first cell is ``first`` high and whose heights grow
+    geometrically (ratio <= MAX_GROWTH) up to at most ``largest``. Returns (n, last/first)."""
+    if length <= 0:
+        raise ValueError("block length must be > 0")
+    if length <= first * (1 + MAX_GROWTH) or largest <= first:
+        return max(1, round(length / first)), 1.0
+    for n in range(2, 100000):
+        if n * first >= length:
+            return n, 1.0  # uniform cells slightly smaller than `first`
+        s_max = first * (MAX_GROWTH**n - 1) / (MAX_GROWTH - 1)
+        if s_max < length:
+            continue
+        lo, hi = 1.0, MAX_GROWTH
+        for _ in range(200):
+            q = 0.5 * (lo + hi)
+            if first * (q**n - 1) / (q - 1) < length:
+                lo = q
+            else:
+                hi = q
+        q = 0.5 * (lo + hi)
+        if first * q ** (n - 1) <= largest * (1 + 1e-9):
+            return n, q ** (n - 1)
+    raise ValueError("no grading found")
+
+
+@dataclass
+class Lattice:
+    """The blockMesh lattice: cell counts and z layout of the three blocks."""
+
+    nx: int
+    ny: int
+    n_below: int
+    n_fabric: int
+    n_above: int
+    grading_below: float  # blockMesh expansion ratio (last/first cell along +z)
+    grading_above: float
+
+    @property
+    def nz(self) -> int:
+        return self.n_below + self.n_fabric + self.n_above
+
+    @property
+    def cells(self) -> int:
+        return self.nx * self.ny * self.nz
+
+
+def make_lattice(s: BoxSetup) -> Lattice:
+    h = s.cell_size_m
+    nx = max(1, round(s.size_x_m / h))
+    ny = max(1, round(s.size_y_m / h))
+    nf = max(1, round((s.fabric_hi_z_m - s.fabric_lo_z_m) / h))
+    hz = (s.fabric_hi_z_m - s.fabric_lo_z_m) / nf
+    nb, eb = geometric_cells(s.fabric_lo_z_m, hz, s.max_cell_height_m)
+    na, ea = geometric_cells(s.top_z_m - s.fabric_hi_z_m, hz, s.max_cell_height_m)
+    return Lattice(nx, ny, nb, nf, na, 1.0 / eb, ea)
+
+
+#: Solid volume fraction (0..1) of each zone cell, shape (nx, ny, n_fabric), from the setup and
+#: the lattice. Zone cell (i, j, k) spans [i hx, (i+1) hx] x [j hy, (j+1) hy] x
+#: [zone_lo + k hz, zone_lo + (k+1) hz].
+SolidFraction = Callable[[BoxSetup, Lattice], npt.NDArray[np.float32]]
+
+
+@dataclass
+class CaseResult:
+    lattice_x: FloatArray
+    lattice_y: FloatArray
+    lattice_z: FloatArray
+    U: npt.NDArray[np.float64]  # (nx, ny, nz, 3) on the lattice, 0 in removed cells
+    p: npt.NDArray[np.float64]  # (nx, ny, nz) Pa, NaN in removed cells
+    fluid: npt.NDArray[np.bool_]
+    solid_fraction: npt.NDArray[np.float32]
+    q_top_m3_s: float
+    q_bottom_m3_s: float
+    iterations: int
+    converged: bool
+    fluid_cells: int
+    lattice_cells: int
+    wall_times_s: dict[str, float]
+    final_residuals: dict[str, float]
+    #: Iteration numbers and outflow through ``bottom`` (m^3/s) at each; empty unless recorded.
+    history_iteration: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    history_q_bottom_m3_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def imbalance(self) -> float:
+        return abs(self.q_top_m3_s - self.q_bottom_m3_s) / max(abs(self.q_bottom_m3_s), 1e-300)
+
+
+# --------------------------------------------------------------------------------------------
+# Case set-up through foamlib
+
+
+def _write_block_mesh(case: Path, s: BoxSetup, lat: Lattice) -> None:
+    from foamlib import FoamFile
+
+    zs = [0.0, s.fabric_lo_z_m, s.fabric_hi_z_m, s.top_z_m]
+    lx, ly = s.size_x_m, s.size_y_m
+    verts = [[x, y, z] for z in zs for (x, y) in ((0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly))]
+    blocks: list[object] = []
+    for b, (nz, grading) in enumerate(
+        ((lat.n_below, lat.grading_below), (lat.n_fabric, 1.0), (lat.n_above, lat.grading_above))
+    ):
+        v = [4 * b + i for i in range(8)]
+        blocks += ["hex", v, [lat.nx, lat.ny, nz], "simpleGrading", [1, 1, float(grading)]]
+    with FoamFile(case / "system" / "blockMeshDict") as f:
+        f["scale"] = 1
+        f["vertices"] = verts
+        f["blocks"] = blocks
+
+
+def _write_solid_field(case: Path, frac: FloatArray) -> None:
+    from foamlib import FoamFieldFile
+
+    f = FoamFieldFile(case / "0" / "solid")
+    f.dimensions = [0, 0, 0, 0, 0, 0, 0]
+    f.internal_field = np.asarray(frac, dtype=np.float64)
+    f.boundary_field = {
+        "top": {"type": "zeroGradient"},
+        "bottom": {"type": "zeroGradient"},
+        "sides": {"type": "symmetry"},
+        "yarns": {"type": "zeroGradient"},
+    }
+
+
+def _reset_fields(case: Path, s: BoxSetup) -> None:
+    from foamlib import FoamFieldFile
+
+    zero = case / "0"
+    shutil.rmtree(zero, ignore_errors=True)
+    shutil.copytree(case / "0.orig", zero)
+    with FoamFieldFile(zero / "p") as p:
+        p.boundary_field["top"]["value"] = s.delta_p_Pa / s.density_kg_m3
+
+
+def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool) -> None:
+    from foamlib import FoamFile
+
+    with FoamFile(case / "system" / "controlDict") as c:
+        c["endTime"] = int(s.max_iterations)
+        c["writeInterval"] = int(s.max_iterations)
+        c["writeFormat"] = "ascii"
+        if record_flow_rate:
+            # sum(phi) over the outlet after every SIMPLE iteration (the flow-rate history)
+            c["functions"] = {
+                FLOW_RATE_FO: {
+                    "type": "surfaceFieldValue",
+                    "libs": ['"libfieldFunctionObjects.so"'],
+                    "regionType": "patch",
+                    "name": "bottom",
+                    "operation": "sum",
+                    "fields": ["phi"],
+                    "writeFields": False,
+                    "log": False,
+                    "writeControl": "timeStep",
+                    "writeInterval": 1,
+                }
+            }
+    with FoamFile(case / "system" / "fvSolution") as f:
+        f["SIMPLE"]["residualControl"]["p"] = float(s.residual_tolerance)
+        f["SIMPLE"]["residualControl"]["U"] = float(s.residual_tolerance)
+    with FoamFile(case / "constant" / "transportProperties") as t:
+        t["nu"] = s.viscosity_Pa_s / s.density_kg_m3
+    with FoamFile(case / "system" / "decomposeParDict") as d:
+        d["numberOfSubdomains"] = int(s.ranks)
+        d["coeffs"]["n"] = [int(s.ranks), 1, 1]
+    # A point inside the topmost layer of cells, away from faces: seed of the connected fluid.
+    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
+    seed = [(lat.nx // 2 + 0.5) * hx, (lat.ny // 2 + 0.5) * hy, s.top_z_m - 0.25 * s.cell_size_m]
+    with FoamFile(case / "system" / "topoSetDict") as t:
+        actions = t["actions"]
+        actions[1]["insidePoints"] = [seed]
+        t["actions"] = actions
+
+
+def _read_internal(path: Path) -> npt.NDArray[np.float64]:
+    from foamlib import FoamFieldFile
+
+    return np.asarray(FoamFieldFile(path).internal_field, dtype=np.float64)
+
+
+def _patch_sum(path: Path, patch: str) -> float:
+    from foamlib import FoamFieldFile
+
+    val = FoamFieldFile(path).boundary_field[patch]["value"]
+    return float(np.sum(np.asarray(val, dtype=np.float64)))
+
+
+def _read_flow_rate_history(case: Path) -> tuple[npt.NDArray[np.int64], FloatArray]:
+    """(iterations, sum(phi) over ``bottom``) written by the function object, m^3/s."""
+    files = sorted((case / "postProcessing" / FLOW_RATE_FO).glob("*/surfaceFieldValue*.dat"))
+    its: list[int] = []
+    qs: list[float] = []
+    for f in files:
+        for line in f.read_text(errors="replace").splitlines():
+            parts = line.split()
+            if not parts or line.lstrip().startswith("#"):
+                continue
+            try:
+                its.append(round(float(parts[0])))
+                qs.append(float(parts[1]))
+            except (ValueError, IndexError):
+                continue
+    return np.array(its, dtype=np.int64), np.array(qs, dtype=np.float64)
+
+
+#: Resistances within this factor of each other share one cellZone (one porosity source).
+ZONE_RATIO = 1.05
+
+
+def _write_porous_zones(case: Path, d_cells: FloatArray) -> bool:
+    """Bin the cells' Darcy resistances d [1/m^2] (0: none) in ratios of ZONE_RATIO, write the
+    field ``resistance`` to 0/, a topoSetDict.porous that makes one cellZone per bin and
+    constant/fvOptions with one explicitPorositySource (DarcyForchheimer, isotropic d = the bin's
+    geometric mean, f = 0) per zone. Returns False when no cell has a resistance."""
+    from foamlib import FoamFieldFile, FoamFile
+
+    pos = d_cells[d_cells > 0]
+    if len(pos) == 0:
+        return False
+    lo = float(pos.min())
+    nbins = int(math.floor(math.log(float(pos.max()) / lo) / math.log(ZONE_RATIO))) + 1
+    f = FoamFieldFile(case / "0" / "resistance")
+    f.dimensions = [0, -2, 0, 0, 0, 0, 0]
+    f.internal_field = np.asarray(d_cells, dtype=np.float64)
+    f.boundary_field = {p: {"type": "zeroGradient"} for p in ("top", "bottom", "yarns")}
+    f.boundary_field["sides"] = {"type": "symmetry"}
+    actions: list[dict[str, object]] = []
+    options: dict[str, object] = {}
+    used = np.floor(np.log(pos / lo) / math.log(ZONE_RATIO)).astype(np.int64)
+    for b in sorted(set(used.tolist())):
+        a, c = lo * ZONE_RATIO**b, lo * ZONE_RATIO ** (b + 1)
+        lo_edge = a * (1 - 1e-9) if b > 0 else a * 0.5
+        hi_edge = c * (1 - 1e-9) if b < nbins - 1 else c * 2.0
+        name = f"porous{b}"
+        actions.append({"name": name, "type": "cellSet", "action": "new", "source": "fieldToCell",
+                        "field": "resistance", "min": lo_edge, "max": hi_edge})  # fmt: skip
+        actions.append({"name": name, "type": "cellZoneSet", "action": "new",
+                        "source": "setToCellZone", "set": name})  # fmt: skip
+        d = math.sqrt(a * c)
+        options[name] = {
+            "type": "explicitPorositySource", "active": True,
+            "explicitPorositySourceCoeffs": {
+                "type": "DarcyForchheimer", "selectionMode": "cellZone", "cellZone": name,
+                "DarcyForchheimerCoeffs": {
+                    "d": [d, d, d], "f": [0.0, 0.0, 0.0],
+                    "coordinateSystem": {"type": "cartesian", "origin": [0.0, 0.0, 0.0],
+                                         "rotation": {"type": "axes", "e1": [1.0, 0.0, 0.0],
+                                                      "e2": [0.0, 1.0, 0.0]}},
+                },
+            },
+        }  # fmt: skip
+    header = {"version": 2.0, "format": "ascii", "class": "dictionary"}
+    with FoamFile(case / "system" / "topoSetDict.porous") as t:
+        t["FoamFile"] = {**header, "object": "topoSetDict"}
+        t["actions"] = actions
+    with FoamFile(case / "constant" / "fvOptions") as o:
+        o["FoamFile"] = {**header, "object": "fvOptions"}
+        for k, v in options.items():
+            o[k] = v
+    return True
+
+
+def voxel_fraction(img: VoxelImage, s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float32]:
+    """Solid volume fraction of each zone cell from the voxels of ``img`` whose centres it holds.
+    Shape (nx, ny, n_fabric)."""
+    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
+    hz = (s.fabric_hi_z_m - s.fabric_lo_z_m) / lat.n_fabric
+    ix = np.clip(np.floor((img.centres(0) - 0.0) / hx).astype(np.int64), 0, lat.nx - 1)
+    iy = np.clip(np.floor((img.centres(1) - 0.0) / hy).astype(np.int64), 0, lat.ny - 1)
+    iz = np.floor((img.centres(2) - s.fabric_lo_z_m) / hz).astype(np.int64)
+    keep = (iz >= 0) & (iz < lat.n_fabric)  # voxels outside the zone (a taller zone) drop out
+    solid = img.solid[:, :, keep]
+    iz = iz[keep]
+    flat = (ix[:, None, None] * lat.ny + iy[None, :, None]) * lat.n_fabric + iz[None, None, :]
+    n = lat.nx * lat.ny * lat.n_fabric
+    total = np.bincount(flat.ravel(), minlength=n).astype(np.float64)
+    sol = np.bincount(flat.ravel(), weights=solid.ravel().astype(np.float64), minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = np.where(total > 0, sol / np.maximum(total, 1), 0.0)
+    return frac.reshape(lat.nx, lat.ny, lat.n_fabric).astype(np.float32)
+
+
+def volume_preserving(frac: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """0/1 solid indicator of equal-volume cells: the m cells with the largest solid fractions,
+    m = round(sum of the fractions), so the removed volume equals the sampled solid volume (the
+    rule "fraction >= 1/2" overestimates the solid of thin cylinders by several percent at 8
+    cells across: 0.107 instead of 0.1 for a square array at solid fraction 0.1)."""
+    flat = np.asarray(frac, dtype=np.float64).ravel()
+    m = int(round(float(flat.sum())))
+    out = np.zeros(flat.size, dtype=np.float32)
+    if m > 0:
+        out[np.argsort(-flat, kind="stable")[:m]] = 1.0
+    return out.reshape(np.shape(frac))
+
+
+def _layers(z: FloatArray, tol: float) -> FloatArray:
+    """Distinct heights of cell centres (values closer than ``tol`` are one layer)."""
+    zs = np.sort(z)
+    starts = np.concatenate([[0], np.nonzero(np.diff(zs) > tol)[0] + 1])
+    return np.asarray(np.add.reduceat(zs, starts) / np.diff(np.append(starts, len(zs))))
+
+
+def _nearest_layer(centres: FloatArray, z: FloatArray, tol: float) -> npt.NDArray[np.int64]:
+    k = np.clip(np.searchsorted(centres, z), 1, len(centres) - 1) if len(centres) > 1 else np.zeros(len(z), dtype=np.int64)
+    if len(centres) > 1:
+        k = np.where(np.abs(centres[k - 1] - z) < np.abs(centres[k] - z), k - 1, k)
+    if np.any(np.abs(centres[k] - z) > tol):
+        raise StageError("cell centres do not lie on the blockMesh lattice")
+    return np.asarray(k, dtype=np.int64)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+_CONVERGED = re.compile(r"SIMPLE solution converged in (\d+) iterations")
+_TIME = re.compile(r"^Time = (\d+)\s*$", re.MULTILINE)
+_RESIDUAL = re.compile(r"Solving for (Ux|Uy|Uz|p), Initial residual = ([0-9.eE+-]+)")
+
+
+def run_case(
+    s: BoxSetup,
+    solid_fraction: SolidFraction,
+    work: Path,
+    *,
+    record_flow_rate: bool = False,
+    preserve_volume: bool = False,
+    resistance: SolidFraction | None = None,
+    oversubscribe: bool = False,
+    show_progress: bool | None = None,
+) -> CaseResult:
+    """Mesh, solve and read back one case in ``work`` (``work/case`` is replaced; logs
+    ``work/log.<tool>``). ``record_flow_rate`` adds the per-iteration outflow history;
+    ``preserve_volume`` removes the cells of :func:`volume_preserving` instead of those with solid
+    fraction >= 1/2; ``resistance`` gives the Darcy resistance 1/k [1/m^2] of each zone cell
+    (sub-grid solid), applied by :func:`_write_porous_zones`."""
+    lat = make_lattice(s)
+    work = work.resolve()
+    case = work / CASE_DIR
+    shutil.rmtree(case, ignore_errors=True)
+    shutil.copytree(template_dir(), case)
+    (case / "0").mkdir(exist_ok=True)
+    for f in (case / "0.orig").iterdir():
+        shutil.copy(f, case / "0" / f.name)
+    _write_block_mesh(case, s, lat)
+    _set_controls(case, s, lat, record_flow_rate)
+    times: dict[str, float] = {}
+
+    def tool(cmd: list[str], name: str, ranks: int = 1, progress: object = None) -> None:
+        res = run(
+            cmd, work / f"log.{name}", cwd=case, ranks=ranks, progress=progress,  # type: ignore[arg-type]
+            oversubscribe=oversubscribe, description=name, show_progress=show_progress,
+        )  # fmt: skip
+        times[name] = res.elapsed_s
+
+    tool(["blockMesh"], "blockMesh")
+    tool(["postProcess", "-func", "writeCellCentres", "-time", "0"], "writeCellCentres")
+    C = _read_internal(case / "0" / "C").reshape(-1, 3)
+    if len(C) != lat.cells:
+        raise StageError(f"blockMesh made {len(C)} cells, expected {lat.cells}")
+    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
+    ci = np.clip(np.floor(C[:, 0] / hx).astype(np.int64), 0, lat.nx - 1)
+    cj = np.clip(np.floor(C[:, 1] / hy).astype(np.int64), 0, lat.ny - 1)
+    tol = 1e-3 * s.cell_size_m
+    z_centres = _layers(C[:, 2], tol)
+    if len(z_centres) != lat.nz:
+        raise StageError(f"found {len(z_centres)} cell layers, expected {lat.nz}")
+    ck = _nearest_layer(z_centres, C[:, 2], tol)
+    frac_f = solid_fraction(s, lat)
+    if frac_f.shape != (lat.nx, lat.ny, lat.n_fabric):
+        raise StageError(f"solid fraction of shape {frac_f.shape}, expected "
+                         f"{(lat.nx, lat.ny, lat.n_fabric)}")  # fmt: skip
+    frac = np.zeros((lat.nx, lat.ny, lat.nz), dtype=np.float32)
+    frac[:, :, lat.n_below : lat.n_below + lat.n_fabric] = frac_f
+    removal = frac.copy()
+    if preserve_volume:
+        removal[:, :, lat.n_below : lat.n_below + lat.n_fabric] = volume_preserving(frac_f)
+    _write_solid_field(case, removal[ci, cj, ck])
+    tool(["topoSet"], "topoSet")
+    tool(["subsetMesh", "fluid", "-patch", "yarns", "-overwrite"], "subsetMesh")
+    # subsetMesh also subset the cell-centre field: the centres of the kept cells, in the new
+    # mesh's order, locate each fluid cell on the lattice.
+    Cf = _read_internal(case / "0" / "C").reshape(-1, 3)
+    fi = np.clip(np.floor(Cf[:, 0] / hx).astype(np.int64), 0, lat.nx - 1)
+    fj = np.clip(np.floor(Cf[:, 1] / hy).astype(np.int64), 0, lat.ny - 1)
+    fk = _nearest_layer(z_centres, Cf[:, 2], tol)
+    _reset_fields(case, s)
+    if resistance is not None:
+        d_zone = np.asarray(resistance(s, lat), dtype=np.float64)
+        d_cells = np.zeros(len(Cf))
+        inz = (fk >= lat.n_below) & (fk < lat.n_below + lat.n_fabric)
+        d_cells[inz] = d_zone[fi[inz], fj[inz], fk[inz] - lat.n_below]
+        if _write_porous_zones(case, d_cells):
+            tool(["topoSet", "-dict", "system/topoSetDict.porous"], "topoSet.porous")
+    for stale in case.glob("processor*"):
+        shutil.rmtree(stale)
+    shutil.rmtree(case / "postProcessing", ignore_errors=True)
+    progress = openfoam_progress(0.0, float(s.max_iterations))
+    if s.ranks > 1:
+        tool(["decomposePar", "-force"], "decomposePar")
+        tool(["simpleFoam", "-parallel"], "simpleFoam", ranks=s.ranks, progress=progress)
+        tool(["reconstructPar", "-latestTime"], "reconstructPar")
+    else:
+        tool(["simpleFoam"], "simpleFoam", progress=progress)
+    log = (work / "log.simpleFoam").read_text(errors="replace")
+    m = _CONVERGED.search(log)
+    steps = [int(t) for t in _TIME.findall(log)]
+    iterations = int(m.group(1)) if m else (steps[-1] if steps else 0)
+    residuals: dict[str, float] = {}
+    for name, val in _RESIDUAL.findall(log):
+        residuals[name] = float(val)
+    times_dirs = sorted(
+        (d for d in case.iterdir() if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
+        key=lambda d: float(d.name),
+    )
+    if not times_dirs:
+        raise StageError(f"simpleFoam wrote no solution in {case}")
+    last = times_dirs[-1]
+    U = _read_internal(last / "U").reshape(-1, 3)
+    p = _read_internal(last / "p").ravel()
+    if p.size == 1:
+        p = np.full(len(Cf), float(p[0]))
+    if U.shape[0] == 1:
+        U = np.repeat(U, len(Cf), axis=0)
+    q_top = -_patch_sum(last / "phi", "top")
+    q_bottom = _patch_sum(last / "phi", "bottom")
+    Ul = np.zeros((lat.nx, lat.ny, lat.nz, 3))
+    pl = np.full((lat.nx, lat.ny, lat.nz), np.nan)
+    fluid = np.zeros((lat.nx, lat.ny, lat.nz), dtype=bool)
+    idx = (fi, fj, fk)
+    Ul[idx] = U
+    pl[idx] = p * s.density_kg_m3
+    fluid[idx] = True
+    hist_it, hist_q = _read_flow_rate_history(case) if record_flow_rate else (
+        np.zeros(0, np.int64), np.zeros(0))  # fmt: skip
+    return CaseResult(
+        lattice_x=(np.arange(lat.nx) + 0.5) * hx,
+        lattice_y=(np.arange(lat.ny) + 0.5) * hy,
+        lattice_z=z_centres,
+        U=Ul,
+        p=pl,
+        fluid=fluid,
+        solid_fraction=frac,
+        q_top_m3_s=q_top,
+        q_bottom_m3_s=q_bottom,
+        iterations=iterations,
+        converged=m is not None,
+        fluid_cells=int(len(Cf)),
+        lattice_cells=lat.cells,
+        wall_times_s=times,
+        final_residuals=residuals,
+        history_iteration=hist_it,
+        history_q_bottom_m3_s=hist_q,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Output shared by the stages
+
+
+def write_solver_record(group: Any, s: BoxSetup, res: CaseResult) -> None:
+    """Attributes of an HDF5 group (``/solver``): application, iterations, residual convergence,
+    cell counts, ranks, wall time per tool (s), final initial residuals and the setup."""
+    group.attrs["application"] = "simpleFoam (laminar, SIMPLEC)"
+    group.attrs["iterations"] = res.iterations
+    group.attrs["converged"] = res.converged
+    group.attrs["lattice_cells"] = res.lattice_cells
+    group.attrs["fluid_cells"] = res.fluid_cells
+    group.attrs["ranks"] = s.ranks
+    for k, v in res.wall_times_s.items():
+        group.attrs[f"wall_time_{k}_s"] = v
+    for k, v in res.final_residuals.items():
+        group.attrs[f"final_initial_residual_{k}"] = v
+    for k, v in asdict(s).items():
+        group.attrs[f"setup_{k}"] = v if v is not None else "none"
+
+
+def plot_section(ax: Any, s: BoxSetup, res: CaseResult, values: FloatArray, title: str,
+                 margin_m: float) -> Any:  # fmt: skip
+    """Colour map of ``values`` (nx, nz) on the lattice plane y = Ly / 2 (pass that plane's
+    values), removed cells grey, z from ``margin_m`` below the zone to ``margin_m`` above it."""
+    j = len(res.lattice_y) // 2
+    X, Z = np.meshgrid(res.lattice_x * 1e3, res.lattice_z * 1e3, indexing="ij")
+    pc = ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], values, np.nan), shading="nearest",
+                       cmap="viridis")  # fmt: skip
+    ax.pcolormesh(X, Z, np.where(res.fluid[:, j, :], np.nan, 1.0), shading="nearest",
+                  cmap="Greys", vmin=0, vmax=1.5)  # fmt: skip
+    ax.set_ylim((s.fabric_lo_z_m - margin_m) * 1e3, min(s.top_z_m, s.fabric_hi_z_m + margin_m) * 1e3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("z [mm]")
+    ax.set_title(f"{title} at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: solid)")
+    return pc

@@ -1,0 +1,85 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Small typed readers of upstream stage products, for stages that must not import each other.
+
+Paths are relative to the scene's output folder; ``tests/test_permeability.py`` checks that they
+agree with the producing stages' ``folder`` and ``products``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+
+from .fabric_geometry import VoxelImage
+
+__all__ = [
+    "FABRIC_H5",
+    "FIBERS_H5",
+    "LAYDOWN_H5",
+    "Chain",
+    "read_fabric_image",
+    "read_sheet_chains",
+    "read_yarn_chains",
+]
+
+FABRIC_H5 = Path("fabric") / "fabric.h5"
+FIBERS_H5 = Path("fibers") / "fibers.h5"
+LAYDOWN_H5 = Path("laydown") / "laydown.h5"
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Chain:
+    """A chain of capsules: centre-line points (m, 3) [m] and one radius [m]."""
+
+    points: FloatArray
+    radius: float
+
+
+def read_fabric_image(path: Path) -> VoxelImage:
+    """The voxel image of a ``fabric.h5``."""
+    with h5py.File(path, "r") as f:
+        ds = f["voxels/solid"]
+        return VoxelImage(
+            np.asarray(ds[...]) != 0,
+            np.asarray(ds.attrs["origin_m"], dtype=np.float64),
+            np.asarray(ds.attrs["voxel_size_m"], dtype=np.float64),
+            {
+                k: (v.item() if isinstance(v, np.generic) else v)
+                for k, v in f["properties"].attrs.items()
+            },
+        )
+
+
+def read_yarn_chains(path: Path) -> list[Chain]:
+    """The yarns of a generated ``fabric.h5`` as capsule chains (empty for imported fabrics)."""
+    with h5py.File(path, "r") as f:
+        if "yarns" not in f:
+            return []
+        g = f["yarns"]
+        pts = np.asarray(g["points"][...], dtype=np.float64)
+        offs = np.asarray(g["offsets"][...], dtype=np.int64)
+        rad = np.asarray(g["radius"][...], dtype=np.float64)
+    return [Chain(pts[offs[i] : offs[i + 1]].copy(), float(rad[i])) for i in range(len(rad))]
+
+
+def read_sheet_chains(laydown_h5: Path, fibers_h5: Path) -> list[Chain]:
+    """The fibers on the laid-down sheet (final snapshot of ``laydown.h5``) as capsule chains, each
+    with the largest outer section radius of its fiber in ``fibers.h5`` (circular sections)."""
+    with h5py.File(laydown_h5, "r") as f:
+        x = np.asarray(f["sheet/x"][...], dtype=np.float64)
+        offs = np.asarray(f["sheet/offsets"][...], dtype=np.int64)
+        ids = np.asarray(f["sheet/fiber_id"][...], dtype=np.int64)
+    with h5py.File(fibers_h5, "r") as f:
+        f_offs = np.asarray(f["fibers/offsets"][...], dtype=np.int64)
+        radii = np.asarray(f["fibers/radii"][...], dtype=np.float64)
+    chains = []
+    for k, fid in enumerate(ids):
+        r = float(np.max(radii[f_offs[fid] : f_offs[fid + 1], :2]))
+        chains.append(Chain(x[offs[k] : offs[k + 1]].copy(), r))
+    return chains
