@@ -367,10 +367,13 @@ def warp_crimp(yarns: list[Yarn]) -> float:
 # Checks
 
 
-def _seg_seg_distance(
+def segment_distances(
     p1: FloatArray, q1: FloatArray, p2: FloatArray, q2: FloatArray
 ) -> FloatArray:
-    """Distance between segments [p1,q1] and [p2,q2] (arrays (..., 3), broadcast)."""
+    """Distance between segments [p1,q1] and [p2,q2] (arrays (..., 3), broadcast; e.g. rows of
+    two (n, 3) arrays pairwise, or all pairs with p1[:, None] and p2[None, :]): the closest points
+    with both parameters clamped to [0, 1]. The one implementation used by the fabric checks, fiber
+    placement (stage generate) and the lay-down's clearances."""
     d1 = q1 - p1
     d2 = q2 - p2
     r = p1 - p2
@@ -423,7 +426,7 @@ def check_yarns(yarns: list[Yarn]) -> YarnCheck:
             mb = np.all((np.minimum(b0, b1) - rb <= hi) & (np.maximum(b0, b1) + rb >= lo), axis=1)
             if not ma.any() or not mb.any():
                 continue
-            d = _seg_seg_distance(
+            d = segment_distances(
                 a0[ma][:, None, :], a1[ma][:, None, :], b0[mb][None, :, :], b1[mb][None, :, :]
             )
             clear = float(d.min()) - yarns[i].radius - yarns[j].radius

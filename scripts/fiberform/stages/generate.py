@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import StageError
+from ..fabric_geometry import segment_distances
 from ..fiber_io import Fiber, quat_from_frames, write_fibers_liggghts
 from ..inputs import STAR, LiggghtsInput, Token, file_token
 from ..provenance import file_hash, write_dataset
@@ -267,26 +268,6 @@ def read_csv_columns(path: Path) -> dict[str, Array]:
 
 # ------------------------------------------------------------------------------------------------
 # placement without intersection
-
-
-def segment_distances(p0: Array, p1: Array, q0: Array, q1: Array) -> Array:
-    """Shortest distances between segments p0-p1 and q0-q1 (arrays (m, 3), pairwise rows)."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a = np.einsum("ij,ij->i", d1, d1)
-    e = np.einsum("ij,ij->i", d2, d2)
-    f = np.einsum("ij,ij->i", d2, r)
-    c = np.einsum("ij,ij->i", d1, r)
-    b = np.einsum("ij,ij->i", d1, d2)
-    denom = a * e - b * b
-    s = np.where(denom > 1e-30 * a * e, np.clip((b * f - c * e) / np.where(denom > 0, denom, 1), 0, 1), 0.0)
-    t = (b * s + f) / e
-    # clamp t and recompute s
-    t_c = np.clip(t, 0.0, 1.0)
-    s = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), s))
-    t = t_c
-    cp = p0 + s[:, None] * d1
-    cq = q0 + t[:, None] * d2
-    return np.linalg.norm(cp - cq, axis=1)
 
 
 def segments_intersect(fa: Fiber, fb: Fiber, gap: float = 0.0) -> bool:

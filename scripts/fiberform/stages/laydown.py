@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import FiberformError, StageError
+from ..fabric_geometry import segment_distances
 from ..inputs import (
     STAR, LiggghtsInput, dump_format, file_token, fix_ref, ident_list, quit_if_at_least,
     step_file_token,
@@ -280,29 +281,9 @@ def _yarn_segments(pts: Array, offs: Array, rad: Array) -> tuple[Array, Array, A
     return a, b, r
 
 
-def segment_distances(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
-    """Distances between the segments p1-q1 (n, 3) and p2-q2 (m, 3): (n, m), exact (closest points
-    of two segments with both parameters clamped to [0, 1])."""
-    d1 = (q1 - p1)[:, None, :]
-    d2 = (q2 - p2)[None, :, :]
-    r = p1[:, None, :] - p2[None, :, :]
-    a = np.einsum("ijk,ijk->ij", d1, d1) + np.zeros(r.shape[:2])
-    e = np.einsum("ijk,ijk->ij", d2, d2) + np.zeros(r.shape[:2])
-    b = np.einsum("ijk,ijk->ij", d1, d2)
-    c = np.einsum("ijk,ijk->ij", d1, r)
-    f = np.einsum("ijk,ijk->ij", d2, r)
-    sa, se = np.where(a > 0, a, 1.0), np.where(e > 0, e, 1.0)
-    den = a * e - b * b
-    s = np.where(den > 1e-14 * a * e, np.clip((b * f - c * e) / np.where(den > 0, den, 1.0), 0, 1), 0.0)
-    t = (b * s + f) / se
-    lo, hi = t < 0.0, t > 1.0
-    s = np.where(lo, np.clip(-c / sa, 0, 1), np.where(hi, np.clip((b - c) / sa, 0, 1), s))
-    t = np.clip(t, 0.0, 1.0)
-    s = np.where(a > 0, s, 0.0)
-    t = np.where(e > 0, np.where(a > 0, t, np.clip(f / se, 0, 1)), 0.0)
-    s = np.where((a > 0) & (e <= 0), np.clip(-c / sa, 0, 1), s)
-    diff = r + s[..., None] * d1 - t[..., None] * d2
-    return np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+def _all_pairs(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
+    """Distances between every segment p1-q1 (n, 3) and every segment p2-q2 (m, 3): (n, m)."""
+    return segment_distances(p1[:, None, :], q1[:, None, :], p2[None, :, :], q2[None, :, :])
 
 
 def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Array) -> float:
@@ -316,7 +297,7 @@ def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Ar
     a, b, r = _yarn_segments(pts, offs, rad)
     out = math.inf
     for chunk in np.array_split(idx, max(1, len(idx) // 200)):
-        d = segment_distances(x[chunk], x[chunk + 1], a, b) - r[None, :]
+        d = _all_pairs(x[chunk], x[chunk + 1], a, b) - r[None, :]
         out = min(out, float(d.min()))
     return out
 
@@ -335,7 +316,7 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array) -> float:
     r_el = np.maximum(radius[idx], radius[idx + 1])
     out = math.inf
     for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
-        d = segment_distances(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+        d = _all_pairs(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
         d = d - r_el[chunk][:, None] - r_el[None, :]
         d[owner[chunk][:, None] == owner[None, :]] = math.inf
         out = min(out, float(d.min()))
