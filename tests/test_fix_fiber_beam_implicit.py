@@ -246,15 +246,20 @@ def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
                              dt=1e-6, steps=1, fix_options=opts)
         with pytest.raises(RuntimeError, match=msg):
             run_case(fiberdem_build, tmp_path / msg, case)
-    # contact keywords: newton for fixed planes only; fiber pairs in newton mode without self-contact
+    # contact keywords: fiber pairs in newton mode without self-contact; the press plate's servo/stop
     for cmds, msg in [(["pair_style fiber/dlvo implicit_force newton self_contact yes", "pair_coeff * *"],
                        "self_contact"),
+                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 servo 1e-6 5e-3 0 1 0 1 "
+                        "implicit_force newton"], "p_ref > 0"),
+                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 servo 1e-6 5e-3 1 2 1e-3 1 0 2 "
+                        "implicit_force newton"], "ascend"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 velocity 0 0 1e-3 "
-                        "implicit_force newton"], "moving plate")]:
+                        "servo 1e-6 5e-3 1 1 0 1 implicit_force newton"], "exclude each other"),
+                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 stop -1e-6"], "stop needs")]:
         case = implicit_case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3,
                              dt=1e-6, steps=1, commands=cmds)
         with pytest.raises(RuntimeError, match=msg):
-            run_case(fiberdem_build, tmp_path / msg.replace(" ", "_"), case)
+            run_case(fiberdem_build, tmp_path / msg.replace(" ", "_").replace(">", "gt"), case)
     # and with explicit fibers, newton is refused
     case = Case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3, dt=1e-9, steps=1, newton="on",
                 commands=["pair_style fiber/dlvo implicit_force newton", "pair_coeff * *"])

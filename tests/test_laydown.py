@@ -110,7 +110,7 @@ def _min_element_yarn_distance(x0: np.ndarray, x1: np.ndarray, a: np.ndarray, b:
 
 
 def test_no_fiber_element_passes_through_a_yarn(laydown_run: Path) -> None:
-    from fiberform.stages.particles import read_dump
+    from fiberform.liggghts_log import read_dump
 
     with h5py.File(laydown_run / "fabric" / "fabric.h5", "r") as h:
         pts, offs, rad = h["yarns/points"][...], h["yarns/offsets"][...], h["yarns/radius"][...]
@@ -150,7 +150,7 @@ WALL_GRAN_SCENE = SCENE.replace("name: tiny_laydown", "name: tiny_wall_gran").re
 def test_stock_wall_gran_side_walls_confine_the_fibers(
         tmp_path: Path, build_dir: Path, fiberform_cmd: list[str]) -> None:
     """Domain-rule pluggability: the side planes as stock LIGGGHTS fix wall/gran (Hertz)."""
-    from fiberform.stages.particles import read_dump
+    from fiberform.liggghts_log import read_dump
 
     if not (build_dir / "bin" / "fiberdem").is_file():
         pytest.skip("fiberdem not built")
@@ -176,7 +176,7 @@ def test_stock_wall_gran_side_walls_confine_the_fibers(
 def test_fiber_fiber_gap_closed_form() -> None:
     """Two crossing fibers (along x at z = 0, along y at z = c), node radii r1 and r2: gap
     c - r1 - r2 (an element takes the larger radius of its nodes)."""
-    from fiberform.stages.laydown import fiber_fiber_gap
+    from fiberform.fiber_sheet import fiber_fiber_gap
 
     r1, r2 = 10e-6, 9e-6
     radius = np.array([r1, r1 - 1e-6, r1 - 2e-6, r2 - 1e-6, r2, r2 - 2e-6])

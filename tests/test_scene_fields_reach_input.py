@@ -132,3 +132,61 @@ def test_permeability_field_changes_the_case(field: str) -> None:
     base: dict[str, object] = {"mode": "subgrid"} if field in PERM_SUBGRID_ONLY else {}
     assert _perm_effect(base) != _perm_effect({**base, field: PERM_ALTERNATIVES[field]}), \
         f"permeability.{field} does not reach the case"
+
+
+# ---- press section: every field reaches the press's input (stage press, issue 11) -------------
+PRESS_BASES: dict[str, dict[str, object]] = {
+    "pressure": {"mode": "pressure", "target_pressure_Pa": 20.0},
+    "velocity": {"mode": "velocity", "target_thickness_m": 10.0e-6},
+}
+# field -> (base it changes, another valid value)
+PRESS_ALTERNATIVES: dict[str, tuple[str, object]] = {
+    "mode": ("velocity", "pressure"),  # with target_pressure_Pa added below
+    "timestep_s": ("pressure", 2.0e-7),
+    "output_interval_s": ("pressure", 2.0e-4),
+    "plate_start_gap_m": ("pressure", 7.0e-6),
+    "plate_speed_m_s": ("pressure", 3.0e-3),
+    "target_thickness_m": ("velocity", 12.0e-6),
+    "target_pressure_Pa": ("pressure", 30.0),
+    "pressure_rate_Pa_s": ("pressure", 1.0e5),
+    "hold_time_s": ("pressure", 2.0e-3),
+    "release_time_s": ("pressure", 3.0e-3),
+    "servo_band_Pa": ("pressure", 5.0),
+    "overlap_limit": ("pressure", 0.3),
+    "ranks": ("pressure", 2),
+}
+
+
+def _press_input(base: str, field: str | None = None) -> str:
+    from fiberform.stages import press
+
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["laydown"].update({"yarn_contact": "newton", "fiber_contact": "newton"})
+    data["press"] = dict(PRESS_BASES[base])
+    if field is not None:
+        data["press"][field] = PRESS_ALTERNATIVES[field][1]
+        if field == "mode":
+            data["press"].pop("target_thickness_m")
+            data["press"]["target_pressure_Pa"] = 20.0
+    scene = parse_scene(data, "press.yaml")
+    # a sheet 40 um above the fabric top (2.637 mm), fibers 20 um thick
+    plan = press.PressPlan(scene, sheet_top=2.677e-3, fabric_top=2.637e-3, t_min=20e-6)
+    return press.build_input(scene, plan)
+
+
+def test_every_press_field_has_an_alternative() -> None:
+    from fiberform.scene import PressSection
+
+    assert set(PressSection.model_fields) == set(PRESS_ALTERNATIVES)
+
+
+@pytest.mark.parametrize("field", sorted(PRESS_ALTERNATIVES))
+def test_press_field_changes_the_input(field: str) -> None:
+    base = PRESS_ALTERNATIVES[field][0]
+    if field == "ranks":
+        from fiberform.stages import press
+
+        src = Path(press.__file__).read_text()
+        assert "ranks=pr.ranks" in src  # the stage launches fiberdem on press.ranks
+        return
+    assert _press_input(base) != _press_input(base, field), f"press.{field} does not reach the input"

@@ -337,6 +337,7 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
       const double vrel = norm(s2.v - s1.v), arel = norm(s2.a - s1.a);
       if (hs - vrel * dt - 0.5 * arel * dt * dt > L.h_cut) continue;
       ++stats.in_range;
+      stats.min_h = std::min(stats.min_h, hs);
       // momentum: a MUTUAL pair (each point the other's closest on the other fiber) is selected by
       // both sides; each side applies its own point's share of the one canonical solve. A
       // ONE-SIDED pair is selected by this side only: it is solved here with half the force (the
@@ -421,6 +422,7 @@ void ContactEngine::wall(const Plane &pl, int groupbit, double dt, bool subinteg
       const double un = std::fabs(dot(s1.v - pl.velocity, pl.normal));
       if (h - un * dt - 0.5 * norm(s1.a) * dt * dt > L.h_cut) continue;
       ++stats.in_range;
+      stats.min_h = std::min(stats.min_h, h);
       law.setup(L, A.rep_radius, std::numeric_limits<double>::infinity(), s1.inv_m, 0.0, y_val, Ywall);
       if (!subintegrate) {
         const Vec3 F = ContactIntegrator::instantaneous_force(law, g, s1, s2);

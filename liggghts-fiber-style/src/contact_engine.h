@@ -15,6 +15,7 @@
 #define FIBERFORM_CONTACT_ENGINE_H
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "contact_integrator.h"
@@ -52,6 +53,9 @@ struct EngineConfig {
 
 struct EngineStats {
   long candidates = 0, in_range = 0, solves = 0, cache_hits = 0, rhs_evals = 0, failures = 0, one_sided = 0;
+  // smallest surface separation h (m) of the point pairs in range during the last pass (negative:
+  // overlap); +infinity when none was in range. Reset by the contact fix before each pass.
+  double min_h = std::numeric_limits<double>::infinity();
 };
 
 // Per-atom arrays the engine reads (local + ghost, index as atom arrays).

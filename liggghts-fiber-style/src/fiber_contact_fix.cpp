@@ -3,7 +3,9 @@
 
 #include <mpi.h>
 
+#include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "abi_guard.h"
 #include "atom.h"
@@ -23,7 +25,7 @@ FiberContactFix::FiberContactFix(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, n
   comm_forward = 7;   // v(3), a0(3), mass share(1)
   comm_reverse = 12;  // fpre, fpost, tpre, tpost
   vector_flag = 1;
-  size_vector = 5;
+  size_vector = 6;  // 5 engine counters + the smallest separation of the last pass
   global_freq = 1;
   extvector = 0;
   nevery = 1;
@@ -69,8 +71,17 @@ void FiberContactFix::subintegrate_all() {
   for (int i = 0; i < nall; ++i)
     for (int k = 0; k < 3; ++k) fpre_[i][k] = fpost_[i][k] = tpre_[i][k] = tpost_b_[i][k] = 0.0;
   const bool torques = atom->torque_flag;
+  engine_->stats.min_h = std::numeric_limits<double>::infinity();
   accumulate(true, {vbuf_, acc_, share_}, {fpre_, fpost_, torques ? tpre_ : nullptr, torques ? tpost_b_ : nullptr});
   comm->reverse_comm_fix(this);
+  sum_forces(fpost_);  // F_vel: the step's impulse / dt (explicit and implicit alike)
+}
+
+void FiberContactFix::sum_forces(double **src) {
+  force_sum_[0] = force_sum_[1] = force_sum_[2] = 0.0;
+  for (int i = 0; i < atom->nlocal; ++i)
+    for (int k = 0; k < 3; ++k) force_sum_[k] += src[i][k];
+  after_pass();
 }
 
 void FiberContactFix::solve_implicit() {
@@ -227,8 +238,10 @@ void FiberContactFix::post_force(int) {
   for (int i = 0; i < nall; ++i)
     for (int k = 0; k < 3; ++k) fpre_[i][k] = fpost_[i][k] = tpre_[i][k] = tpost_b_[i][k] = 0.0;
   const bool torques = atom->torque_flag;
+  engine_->stats.min_h = std::numeric_limits<double>::infinity();
   accumulate(false, {vbuf_, nullptr, share_}, {fpre_, nullptr, torques ? tpre_ : nullptr, nullptr});
   comm->reverse_comm_fix(this);
+  sum_forces(fpre_);
   double **t = atom->torque;
   for (int i = 0; i < atom->nlocal; ++i)
     for (int k = 0; k < 3; ++k) {
@@ -246,6 +259,10 @@ double FiberContactFix::compute_vector(int n) {
     case 2: loc = s.rhs_evals; break;
     case 3: loc = s.failures; break;
     case 4: loc = s.cache_hits; break;
+    case 5:  // smallest separation (m) of the last pass; 1 m when no pair was in range
+      loc = s.min_h;
+      MPI_Allreduce(&loc, &glob, 1, MPI_DOUBLE, MPI_MIN, world);
+      return std::isfinite(glob) ? glob : 1.0;
   }
   MPI_Allreduce(&loc, &glob, 1, MPI_DOUBLE, MPI_SUM, world);
   return glob;

@@ -77,6 +77,10 @@ class FiberContactFix : public Fix {
   virtual void accumulate(bool subintegrate, const fiberform::NodeData &nd, const fiberform::NodeSinks &out) = 0;
   // Distance from a local atom to the farthest atom it may interact with through an element.
   virtual double interaction_reach() = 0;
+  // Called after every pass over the contacts (forces summed over ranks is up to the caller):
+  // force_sum_ then holds this rank's total contact force on its local atoms for the step (N).
+  virtual void after_pass() {}
+  double force_sum_[3] = {0.0, 0.0, 0.0};
   // integrator none: is the instantaneous force added by the fix (wall) or by a pair (false)?
   virtual bool fix_applies_instantaneous() const { return true; }
   bool subintegrating() const { return engine_->cfg.integrator != fiberform::IntegratorKind::None; }
@@ -88,6 +92,7 @@ class FiberContactFix : public Fix {
   void solve_step();             // steps 1-4 above
   void solve_implicit();         // the implicit variant (post_force)
   void subintegrate_all();       // shared by both: all pairs into the sink buffers
+  void sum_forces(double **src);  // force_sum_ over local atoms, then after_pass()
   void grow_buffers();
   double **cpost_ = nullptr, **tpost_ = nullptr;  // per-atom, persistent (nmax)
   double **vbuf_ = nullptr, **acc_ = nullptr, *share_ = nullptr;  // nall

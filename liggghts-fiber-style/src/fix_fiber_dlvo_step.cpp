@@ -132,5 +132,9 @@ void FixFiberDlvoStep::gather_partners() {
 
 double FixFiberDlvoStep::compute_vector(int n) {
   if (!newton_) return FiberContactFix::compute_vector(n);
+  if (n == 5) {  // smallest surface gap of the candidate pairs at the start of the step (m)
+    const double g = partners_.fiber_count() ? partners_.min_gap() : 1.0;
+    return std::isfinite(g) ? g : 1.0;  // the gather is global: every rank has the same value
+  }
   return 0.0;  // no sub-integration in newton mode
 }

@@ -34,7 +34,7 @@ FixFiberYarns::~FixFiberYarns() { FixFiberBeam::release_force_model(lmp, model_.
 
 FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, arg) {
   vector_flag = 1;
-  size_vector = 8;
+  size_vector = 11;
   restart_global = 1;  // removal accounting and the settle counter survive a restart
   global_freq = 1;
   extvector = 0;
@@ -487,6 +487,13 @@ void FixFiberYarns::post_force(int) {
   sums_valid_ = false;
   if (newton_) {
     scan_contacts();
+    // the yarns' and planes' total force on the fibers at the end of the last step (their
+    // converged Newton states), summed over the fibers this rank solved
+    double gap = 0.0;
+    const phys::Vec3 t = model_->take_total(gap);
+    local_force_[0] = t.x;
+    local_force_[1] = t.y;
+    local_force_[2] = t.z;
     return;
   }
   double gap_min = std::numeric_limits<double>::max();
@@ -607,9 +614,11 @@ double FixFiberYarns::compute_vector(int n) {
   if (n == 7) return max_speed_;
   if (!sums_valid_) {
     MPI_Allreduce(local_, sums_, 2, MPI_DOUBLE, MPI_SUM, world);
+    MPI_Allreduce(local_force_, force_, 3, MPI_DOUBLE, MPI_SUM, world);
     MPI_Allreduce(&local_[2], &sums_[2], 1, MPI_DOUBLE, MPI_MAX, world);
     sums_valid_ = true;
   }
   if (n == 5) return -sums_[2];
+  if (n >= 8) return force_[n - 8];
   return sums_[n - 3];
 }

@@ -79,6 +79,9 @@ class FixFiberYarns : public Fix {
   double removed_fibers_ = 0, removed_mass_ = 0, removed_nodes_ = 0;
   double local_[3] = {0, 0, 0};  // yarn contacts, plane contacts, -min gap
   double sums_[3] = {0, 0, 0};
+  // implicit_force newton: the yarns' and planes' total contact force on the fibers at the end of
+  // the last step (N); this rank's share and the sum over ranks (vector 9-11)
+  double local_force_[3] = {0, 0, 0}, force_[3] = {0, 0, 0};
   bool sums_valid_ = false;
   bool implicit_ = false;           // fix fiber/beam integrates implicitly (set in init)
   double beta_eff_ = 0.5, gamma_eff_ = 1.0;  // its effective Newmark coefficients

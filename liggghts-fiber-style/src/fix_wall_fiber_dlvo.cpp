@@ -1,6 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 #include "fix_wall_fiber_dlvo.h"
 
+#include <mpi.h>
+
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -34,6 +36,33 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
   fiberform::EngineConfig cfg;
   int iarg = 10;
   while (iarg < narg) {
+    if (!std::strcmp(arg[iarg], "servo")) {
+      // servo A u_max p_ref N t1 p1 ... tN pN
+      if (iarg + 4 >= narg) error->all(FLERR, "fix wall/fiber/dlvo: servo needs A u_max p_ref N t1 p1 ... tN pN");
+      area_ = force->numeric(FLERR, arg[iarg + 1]);
+      u_max_ = force->numeric(FLERR, arg[iarg + 2]);
+      p_ref_ = force->numeric(FLERR, arg[iarg + 3]);
+      const int n = force->inumeric(FLERR, arg[iarg + 4]);
+      if (!(area_ > 0) || !(u_max_ > 0) || !(p_ref_ > 0) || n < 1)
+        error->all(FLERR, "fix wall/fiber/dlvo: servo needs A > 0 (m^2), u_max > 0 (m/s), p_ref > 0 (Pa), N >= 1");
+      if (iarg + 4 + 2 * n >= narg)
+        error->all(FLERR, "fix wall/fiber/dlvo: servo schedule needs N pairs t_k p_k (s, Pa)");
+      for (int k = 0; k < n; ++k) {
+        schedule_.t.push_back(force->numeric(FLERR, arg[iarg + 5 + 2 * k]));
+        schedule_.p.push_back(force->numeric(FLERR, arg[iarg + 6 + 2 * k]));
+      }
+      if (!schedule_.valid()) error->all(FLERR, "fix wall/fiber/dlvo: servo schedule times must ascend strictly");
+      iarg += 5 + 2 * n;
+      continue;
+    }
+    if (!std::strcmp(arg[iarg], "stop")) {
+      // stop D: the plate travels at most D (m) along its normal from where it starts
+      if (iarg + 1 >= narg) error->all(FLERR, "fix wall/fiber/dlvo: stop needs a distance D >= 0 (m)");
+      travel_max_ = force->numeric(FLERR, arg[iarg + 1]);
+      if (!(travel_max_ >= 0)) error->all(FLERR, "fix wall/fiber/dlvo: stop needs a distance D >= 0 (m)");
+      iarg += 2;
+      continue;
+    }
     if (!std::strcmp(arg[iarg], "velocity")) {
       if (iarg + 3 >= narg) error->all(FLERR, "fix wall/fiber/dlvo: velocity needs vx vy vz (m/s)");
       plane0_.velocity = {force->numeric(FLERR, arg[iarg + 1]), force->numeric(FLERR, arg[iarg + 2]),
@@ -49,6 +78,11 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
   }
   fiberform::validate_contact_config(lmp, style, cfg);
   own_engine_->cfg = cfg;
+  if (area_ > 0 && plane0_.velocity.x * plane0_.velocity.x + plane0_.velocity.y * plane0_.velocity.y +
+                           plane0_.velocity.z * plane0_.velocity.z > 0)
+    error->all(FLERR, "fix wall/fiber/dlvo: servo and velocity exclude each other (the servo sets the speed)");
+  plane_ = plane0_;
+  size_vector = 16;
 }
 
 FixWallFiberDlvo::~FixWallFiberDlvo() {
@@ -61,33 +95,41 @@ void FixWallFiberDlvo::init() {
   newton_ = implicit_beam() && engine_->cfg.implicit_newton;
   if (engine_->cfg.implicit_newton && !implicit_beam())
     error->all(FLERR, "fix wall/fiber/dlvo: implicit_force newton needs fix fiber/beam integrator implicit");
-  const fiberform::Vec3 &vp = plane0_.velocity;
-  if (newton_ && (vp.x != 0.0 || vp.y != 0.0 || vp.z != 0.0))
-    error->all(FLERR, "fix wall/fiber/dlvo: implicit_force newton with a moving plate is not supported yet (a "
-                      "free fiber pushed by the plate leaves it at 1.9x the plate speed; "
-                      "docs/models/contact.md section 8): use implicit_force position or impulse");
   if (newton_ && !model_) {
     bodies_.add_plane(plane0_.point, plane0_.normal, plane0_.velocity);
     newton_law_ = engine_->cfg.law;
     newton_law_.steric.s1_damping = true;  // the PD servo, as fix fiber/yarns (docs/models/contact.md 8)
     model_ = std::make_unique<fiberform::physics::StaticContactModel>(bodies_, newton_law_, 0.0);
+    model_->track_stiffness(area_ > 0);  // the servo's gain bound
   }
   if (beam_) beam_->use_force_model(model_.get(), newton_);
 }
 
-/* implicit_force newton: the plate's position at the end of this step, where the fibers are solved */
+/* implicit_force newton: the plate's force at the end of the last step (the fibers' converged
+   states), the servo's speed from it, and the plate's position at the end of this step, where the
+   fibers are solved. */
 void FixWallFiberDlvo::post_force(int vflag) {
   if (!newton_) {
     FiberContactFix::post_force(vflag);
     return;
   }
-  const double t = (update->ntimestep - step0_) * update->dt;
-  bodies_.set_plane_point(0, plane0_.point + t * plane0_.velocity);
+  double gap = 0.0;
+  double stiff = 0.0;
+  const fiberform::Vec3 t = model_->take_total(gap, stiff);
+  if (area_ > 0) k_bound_ = fiberform::physics::press::stiffness_bound(k_bound_, stiff / area_, kStiffnessDecay);
+  force_sum_[0] = t.x;
+  force_sum_[1] = t.y;
+  force_sum_[2] = t.z;
+  MPI_Allreduce(&gap, &newton_min_gap_, 1, MPI_DOUBLE, MPI_MIN, world);
+  after_pass();
+  move_plane();
+  bodies_.set_plane_point(0, plane_.point);
+  bodies_.set_plane_velocity(0, plane_.velocity);
 }
 
 void FixWallFiberDlvo::setup(int vflag) {
   if (!step0_set_) {
-    step0_ = update->ntimestep;
+    step0_ = moved_ = update->ntimestep;
     step0_set_ = true;
   }
   FiberContactFix::setup(vflag);
@@ -100,9 +142,73 @@ double FixWallFiberDlvo::interaction_reach() {
 }
 
 void FixWallFiberDlvo::accumulate(bool subintegrate, const fiberform::NodeData &nd, const fiberform::NodeSinks &out) {
-  // plane position at the current time (the start of the sub-integrated step)
-  fiberform::Plane pl = plane0_;
-  const double t = (update->ntimestep - step0_) * update->dt;
-  pl.point = pl.point + t * pl.velocity;
-  engine_->wall(pl, groupbit, update->dt, subintegrate, nd, out);
+  // the plane at the current time (the start of the sub-integrated step): moved once per step with
+  // the velocity of the previous step (constant, or the servo's)
+  move_plane();
+  engine_->wall(plane_, groupbit, update->dt, subintegrate, nd, out);
+}
+
+/* Moves the plane to the current step with its velocity, no farther than `stop` allows; a plate
+   at its stop has zero velocity (what the fibers' Newton solves and the outputs see). */
+void FixWallFiberDlvo::move_plane() {
+  if (update->ntimestep <= moved_) return;
+  const double dt = static_cast<double>(update->ntimestep - moved_) * update->dt;
+  moved_ = update->ntimestep;
+  if (travel_max_ >= 0) {
+    const double done = fiberform::physics::dot(plane_.point - plane0_.point, plane_.normal);
+    const double un = fiberform::physics::dot(plane_.velocity, plane_.normal);
+    if (done + un * dt >= travel_max_) {
+      plane_.point = plane_.point + (travel_max_ - done) * plane_.normal;
+      plane_.velocity = {0.0, 0.0, 0.0};
+      at_stop_ = true;
+      return;
+    }
+  }
+  at_stop_ = false;
+  plane_.point = plane_.point + dt * plane_.velocity;
+}
+
+/* After each pass: the total contact force on the fibers (all ranks), the plate pressure, and the
+   servo's plate speed for the next step. */
+void FixWallFiberDlvo::after_pass() {
+  MPI_Allreduce(force_sum_, force_, 3, MPI_DOUBLE, MPI_SUM, world);
+  const double n[3] = {plane_.normal.x, plane_.normal.y, plane_.normal.z};
+  if (area_ <= 0) return;
+  pressure_ = fiberform::physics::press::plate_pressure(force_, n, area_);
+  // the schedule's clock starts at the first contact (any force); before it the plate approaches
+  // at the speed limit
+  if (contact_step_ < 0 && (force_[0] != 0.0 || force_[1] != 0.0 || force_[2] != 0.0))
+    contact_step_ = update->ntimestep;
+  double u = u_max_;
+  target_ = 0.0;
+  if (contact_step_ >= 0) {
+    target_ = schedule_.at((update->ntimestep - contact_step_) * update->dt);
+    u = newton_ ? fiberform::physics::press::servo_speed_bounded(target_, pressure_, p_ref_, u_max_, k_bound_,
+                                                                update->dt, kServoSteps)
+                : fiberform::physics::press::servo_speed(target_, pressure_, p_ref_, u_max_);
+  }
+  if (at_stop_ && u > 0.0) u = 0.0;  // resting on its stop: only a retreat moves it
+  plane_.velocity = u * plane_.normal;
+}
+
+/* 1-5 engine counters, 6 smallest separation (m), 7-9 contact force on the fibers (N), 10 plate
+   displacement along its normal since the fix's first run (m), 11 plate speed along its normal
+   (m/s); servo only (else 0): 12 measured plate pressure (Pa), 13 target pressure (Pa), 14 time
+   since the first contact (s; -1 before it); 15: 1 while the plate rests at its stop (keyword
+   stop), else 0; 16: the servo's stiffness bound (Pa/m; implicit_force newton, else 0). */
+double FixWallFiberDlvo::compute_vector(int n) {
+  if (n == 5 && newton_) return std::isfinite(newton_min_gap_) ? newton_min_gap_ : 1.0;
+  if (n <= 5) return FiberContactFix::compute_vector(n);
+  const fiberform::Vec3 d = plane_.point - plane0_.point;
+  switch (n) {
+    case 6: case 7: case 8: return force_[n - 6];
+    case 9: return fiberform::physics::dot(d, plane_.normal);
+    case 10: return fiberform::physics::dot(plane_.velocity, plane_.normal);
+    case 11: return pressure_;
+    case 12: return target_;
+    case 13: return contact_step_ < 0 ? -1.0 : (update->ntimestep - contact_step_) * update->dt;
+    case 14: return at_stop_ ? 1.0 : 0.0;
+    case 15: return k_bound_;
+  }
+  return 0.0;
 }

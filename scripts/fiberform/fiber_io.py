@@ -25,18 +25,30 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from .inputs import STAR, LiggghtsInput, Token, file_token
+
 __all__ = [
+    "DATA_NAME",
+    "NODES_NAME",
     "Fiber",
+    "fiber_preamble",
+    "write_nodes_subset",
     "quat_from_frames",
     "quat_rotate",
     "quat_to_frames",
     "read_nodes_file",
     "write_fibers_liggghts",
 ]
+
+#: the generated fibers' data and nodes files (stage generate's folder; copied into the working
+#: folders of the stages that run them)
+DATA_NAME = "fibers.data"
+NODES_NAME = "fibers.nodes"
 
 Array = npt.NDArray[np.float64]
 
@@ -159,3 +171,49 @@ def read_nodes_file(path: Path) -> npt.NDArray[np.float64]:
             rows.append([float(v) for v in line.split()])
     width = max(len(r) for r in rows)
     return np.array([r + [math.nan] * (width - len(r)) for r in rows])
+
+
+def write_nodes_subset(src: Path, dst: Path, fiber_ids: Sequence[int]) -> int:
+    """Copy the nodes file ``src`` to ``dst`` keeping only the fibers whose 0-based index is in
+    ``fiber_ids`` (the nodes file's fiber-ID column is 1-based), comments kept: the fibers left in
+    a restart file after the lay-down removed some (fix fiber/beam wants every listed atom).
+    Returns the number of node lines written."""
+    keep = {int(k) + 1 for k in fiber_ids}
+    out, count = [], 0
+    for line in Path(src).read_text().splitlines():
+        body = line.split("#", 1)[0].split()
+        if body and int(body[1]) not in keep:
+            continue
+        count += bool(body)
+        out.append(line)
+    Path(dst).write_text("\n".join(out) + "\n")
+    return count
+
+
+def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,
+                   restart: Token | None = None, flat_decomposition: bool = False) -> None:
+    """The LIGGGHTS commands that load the generated fibers (DATA_NAME, NODES_NAME in the working
+    folder) under fix fiber/beam with ID ``beam``; ``beam_options`` are appended to that fix.
+    With ``restart`` (a restart file of an earlier run of the same input) the atoms, the box and
+    the per-atom state of fix fiber/beam come from that file instead of DATA_NAME (units, atom
+    style, boundary and newton are stored in it). ``flat_decomposition``: MPI ranks split the box
+    in x and y only (a sheet is a thin layer: a split in z would leave it on one rank)."""
+    s.command("units", "si")
+    if flat_decomposition:
+        s.command("processors", STAR, STAR, 1)
+    if restart is None:
+        s.command("atom_style", "sphere")
+    s.command("atom_modify", "map", "array", "sort", 0, 0.0)
+    if restart is None:
+        s.command("boundary", "f", "f", "f")
+        s.command("newton", "on" if newton else "off")
+        s.command("communicate", "single", "vel", "yes")
+        s.command("read_data", file_token(DATA_NAME))
+    else:
+        s.command("read_restart", restart)
+        s.command("communicate", "single", "vel", "yes")
+    s.command("neighbor", 0.1 * f.width_m, "bin")
+    s.command("neigh_modify", "delay", 0)
+    s.command("fix", "beam", "all", "fiber/beam", "nodes", file_token(NODES_NAME),
+              "E", f.youngs_modulus_Pa, "G", f.shear_modulus_Pa, "density", f.density_kg_m3,
+              *beam_options)

@@ -33,7 +33,7 @@ __all__ = [
     "file_token",
     "fix_ref",
     "ident_list",
-    "quit_if_at_least",
+    "jump_if_at_least",
     "fmt_float",
     "fmt_ident",
     "fmt_int",
@@ -163,9 +163,10 @@ def ident_list(names: Sequence[str]) -> Token:
     return Token(",".join(fmt_ident(n) for n in names), _TOKEN_KEY)
 
 
-def fix_ref(fix_id: str, index: int | None = None) -> Token:
-    """A reference to a fix's global value, ``f_ID`` or ``f_ID[n]`` (thermo, variables)."""
-    text = "f_" + fmt_ident(fix_id)
+def fix_ref(fix_id: str, index: int | None = None, negate: bool = False) -> Token:
+    """A reference to a fix's global value, ``f_ID`` or ``f_ID[n]`` (thermo, variables);
+    ``negate``: ``-f_ID[n]`` (an equal-style variable's formula)."""
+    text = ("-" if negate else "") + "f_" + fmt_ident(fix_id)
     if index is not None:
         if isinstance(index, bool) or not isinstance(index, int) or not 1 <= index <= 99:
             raise InputFormatError(f"refusing fix vector index {index!r}")
@@ -173,14 +174,15 @@ def fix_ref(fix_id: str, index: int | None = None) -> Token:
     return Token(text, _TOKEN_KEY)
 
 
-def quit_if_at_least(variable: str, threshold: int | float,
+def jump_if_at_least(variable: str, threshold: int | float, label: str,
                      marker: str = "FIBERFORM_QUIT") -> tuple[Token, ...]:
-    """Arguments of ``if "${variable} >= threshold" then "print MARKER" quit``: stop the input
-    when a variable (an identifier) reaches a number (settle criteria). LIGGGHTS 3.8's ``quit``
-    exits with status 1, so the marker line tells a deliberate stop from a failure."""
+    """Arguments of ``if "${variable} >= threshold" then "print MARKER" "jump SELF label"``: leave
+    a loop of ``run`` commands for the commands after ``label LABEL`` when a variable (an
+    identifier) reaches a number (settle criteria); the marker line records the early end."""
     cond = '"${' + fmt_ident(variable) + "} >= " + fmt_value(threshold) + '"'
     return (Token(cond, _TOKEN_KEY), Token("then", _TOKEN_KEY),
-            Token('"print ' + fmt_ident(marker) + '"', _TOKEN_KEY), Token("quit", _TOKEN_KEY))
+            Token('"print ' + fmt_ident(marker) + '"', _TOKEN_KEY),
+            Token('"jump SELF ' + fmt_ident(label) + '"', _TOKEN_KEY))
 
 
 def _arg(value: object) -> str:
@@ -221,6 +223,11 @@ class LiggghtsInput:
         if name in _FORBIDDEN_COMMANDS:
             raise InputFormatError(f"refusing to write the command {name!r}")
         self._lines.append(" ".join([name, *(_arg(a) for a in args)]))
+
+    def label(self, name: str) -> None:
+        """``label NAME`` (an identifier): the target of :func:`jump_if_at_least`. ``command``
+        refuses ``label`` and ``jump``; these two are the only ways to write them."""
+        self._lines.append("label " + fmt_ident(name))
 
     def render(self) -> str:
         return "\n".join(self._lines) + "\n"

@@ -1,9 +1,18 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Reading LIGGGHTS log files: the thermo table printed during ``run``."""
+"""Reading LIGGGHTS output: the thermo table of a log file printed during ``run``, and the
+frames of a ``dump custom`` text file."""
 
 from __future__ import annotations
 
-__all__ = ["thermo_rows"]
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import StageError
+
+__all__ = ["Frame", "read_dump", "thermo_rows"]
 
 
 def thermo_rows(log: str) -> list[list[float]]:
@@ -29,3 +38,48 @@ def thermo_rows(log: str) -> list[list[float]]:
             except ValueError:
                 pass
     return rows
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One snapshot of a LAMMPS/LIGGGHTS text dump, rows sorted by atom id."""
+
+    step: int
+    ids: npt.NDArray[np.int64]
+    columns: dict[str, npt.NDArray[np.float64]]
+
+
+def read_dump(path: Path) -> list[Frame]:
+    """Read every frame of a ``dump custom`` text file."""
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise StageError(f"cannot read dump {path}: {exc.strerror}") from None
+    frames: list[Frame] = []
+    i = 0
+    try:
+        while i < len(lines):
+            if not lines[i].startswith("ITEM: TIMESTEP"):
+                i += 1
+                continue
+            step = int(lines[i + 1])
+            if not lines[i + 2].startswith("ITEM: NUMBER OF ATOMS"):
+                raise ValueError("NUMBER OF ATOMS expected")
+            n = int(lines[i + 3])
+            j = i + 4
+            while not lines[j].startswith("ITEM: ATOMS"):
+                j += 1
+            names = lines[j].split()[2:]
+            rows = np.array([[float(x) for x in lines[j + 1 + k].split()] for k in range(n)])
+            rows = rows.reshape(n, len(names))
+            order = np.argsort(rows[:, names.index("id")], kind="stable")
+            rows = rows[order]
+            cols = {name: rows[:, c] for c, name in enumerate(names)}
+            ids = cols.pop("id").astype(np.int64)
+            frames.append(Frame(step, ids, cols))
+            i = j + 1 + n
+    except (IndexError, ValueError) as exc:
+        raise StageError(f"malformed dump {path} near line {i + 1}: {exc}") from None
+    if not frames:
+        raise StageError(f"dump {path} holds no frame")
+    return frames

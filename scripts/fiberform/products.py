@@ -18,9 +18,20 @@ from .fabric_geometry import VoxelImage
 
 __all__ = [
     "FABRIC_H5",
+    "FIBERS_DATA",
     "FIBERS_H5",
+    "FIBERS_NODES",
+    "FLOW_GRID",
+    "FLOW_H5",
     "LAYDOWN_H5",
+    "LAYDOWN_RESTART",
+    "PRESS_H5",
     "Chain",
+    "Sheet",
+    "Yarns",
+    "read_fiber_outer_axes",
+    "read_sheet",
+    "read_yarns",
     "read_fabric_image",
     "read_sheet_chains",
     "read_yarn_chains",
@@ -29,6 +40,12 @@ __all__ = [
 FABRIC_H5 = Path("fabric") / "fabric.h5"
 FIBERS_H5 = Path("fibers") / "fibers.h5"
 LAYDOWN_H5 = Path("laydown") / "laydown.h5"
+LAYDOWN_RESTART = Path("laydown") / "sheet.restart"
+FIBERS_NODES = Path("fibers") / "fibers.nodes"
+FIBERS_DATA = Path("fibers") / "fibers.data"
+FLOW_H5 = Path("flow") / "flow.h5"
+FLOW_GRID = Path("flow") / "flow.grid"
+PRESS_H5 = Path("press") / "press.h5"
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -83,3 +100,58 @@ def read_sheet_chains(laydown_h5: Path, fibers_h5: Path) -> list[Chain]:
         r = float(np.max(radii[f_offs[fid] : f_offs[fid + 1], :2]))
         chains.append(Chain(x[offs[k] : offs[k + 1]].copy(), r))
     return chains
+
+
+@dataclass(frozen=True)
+class Sheet:
+    """The laid-down sheet of ``laydown.h5`` (its final snapshot) and the lay-down's last overlaps."""
+
+    x: FloatArray  #: node positions (n, 3) [m], fiber by fiber
+    fiber_id: npt.NDArray[np.int64]  #: 0-based fiber indices into fibers.h5
+    offsets: npt.NDArray[np.int64]  #: fiber k owns nodes offsets[k]:offsets[k+1]
+    min_fiber_fiber_gap: float  #: smallest surface gap of two fibers' elements, last snapshot [m]
+    min_element_clearance: float  #: smallest element-yarn centre-line clearance, last snapshot [m]
+
+
+def read_sheet(laydown_h5: Path) -> Sheet:
+    """The sheet of a ``laydown.h5``."""
+    with h5py.File(laydown_h5, "r") as f:
+        return Sheet(
+            np.asarray(f["sheet/x"][...], dtype=np.float64),
+            np.asarray(f["sheet/fiber_id"][...], dtype=np.int64),
+            np.asarray(f["sheet/offsets"][...], dtype=np.int64),
+            float(f["snapshots/min_fiber_fiber_gap"][-1]),
+            float(f["snapshots/min_element_clearance"][-1]),
+        )
+
+
+@dataclass(frozen=True)
+class Yarns:
+    """The yarn centre lines of a generated ``fabric.h5``."""
+
+    points: FloatArray  #: (n, 3) [m]
+    offsets: npt.NDArray[np.int64]  #: yarn k owns points offsets[k]:offsets[k+1]
+    radius: FloatArray  #: one radius per yarn [m]
+
+    @property
+    def top(self) -> float:
+        """The fabric top: the highest point of any yarn surface [m]."""
+        return float(np.max(self.points[:, 2] + np.repeat(self.radius, np.diff(self.offsets))))
+
+
+def read_yarns(fabric_h5: Path) -> Yarns:
+    """The yarns of a generated ``fabric.h5``."""
+    with h5py.File(fabric_h5, "r") as f:
+        return Yarns(np.asarray(f["yarns/points"][...], dtype=np.float64),
+                     np.asarray(f["yarns/offsets"][...], dtype=np.int64),
+                     np.asarray(f["yarns/radius"][...], dtype=np.float64))
+
+
+def read_fiber_outer_axes(fibers_h5: Path, fiber_ids: npt.NDArray[np.int64]) -> FloatArray:
+    """For the nodes of the fibers ``fiber_ids`` (in that order): the outer section half-axes
+    (a1, a2) [m], shape (n, 2), from ``fibers.h5``."""
+    with h5py.File(fibers_h5, "r") as f:
+        offs = np.asarray(f["fibers/offsets"][...], dtype=np.int64)
+        radii = np.asarray(f["fibers/radii"][...], dtype=np.float64)
+    parts = [radii[offs[k]:offs[k + 1], :2] for k in fiber_ids]
+    return np.concatenate(parts) if parts else np.zeros((0, 2))

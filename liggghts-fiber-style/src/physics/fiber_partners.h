@@ -119,6 +119,7 @@ class FiberPartners {
     bodies_.build_bins(reach);
     // pairs, each once (from the fiber of smaller id, unshifted)
     std::vector<BodyHit> hits;
+    min_gap_ = std::numeric_limits<double>::infinity();
     parent_.resize(fibers_.size());
     std::iota(parent_.begin(), parent_.end(), 0);
     for (int fa = 0; fa < static_cast<int>(fibers_.size()); ++fa) {
@@ -130,6 +131,7 @@ class FiberPartners {
         for (const BodyHit &g : hits) {
           const SegRef &sr = seg_[static_cast<std::size_t>(g.seg)];
           if (fibers_[static_cast<std::size_t>(sr.fiber)].id < f.id) continue;
+          min_gap_ = std::min(min_gap_, g.h);
           pairs_.push_back({fa, k, sr.fiber, sr.k, sr.shift});
           unite(fa, sr.fiber);
         }
@@ -152,6 +154,8 @@ class FiberPartners {
     return r;
   }
   const std::vector<Pair> &pairs() const { return pairs_; }
+  // smallest surface gap of the candidate pairs at build time (m; +infinity without pairs)
+  double min_gap() const { return min_gap_; }
   // the pairs of the cluster named by fiber index c (empty if none)
   const std::vector<int> &cluster_pairs(int c) const {
     static const std::vector<int> none;
@@ -177,6 +181,7 @@ class FiberPartners {
   std::vector<Fiber> fibers_;
   std::vector<SegRef> seg_;
   std::vector<Pair> pairs_;
+  double min_gap_ = std::numeric_limits<double>::infinity();
   std::vector<int> parent_;
   std::map<int, std::vector<int>> by_cluster_;
   StaticBodies bodies_;

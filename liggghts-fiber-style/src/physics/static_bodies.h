@@ -92,6 +92,7 @@ class StaticBodies {
   }
   // moves plane k (a plate) to point p
   void set_plane_point(int k, Vec3 p) { planes_[static_cast<std::size_t>(k)].p = p; }
+  void set_plane_velocity(int k, Vec3 v) { planes_[static_cast<std::size_t>(k)].v = v; }
   const std::vector<Segment> &segments() const { return segs_; }
   const std::vector<Plane> &planes() const { return planes_; }
 
@@ -254,11 +255,47 @@ class BodyContactModel : public rod::NodeForceModel {
   int contacts() const { return contacts_; }    // gaps below h_cut at the last evaluation
   double min_gap() const { return min_gap_; }   // smallest gap at the last evaluation (m)
 
+  // The total contact force on the fibers solved since the last take_total(): the sum over the
+  // fibers (or clusters) of the model's forces at each one's LAST evaluation (N), the converged
+  // end-of-step state. The smallest gap over them likewise (m; +infinity when none was near).
+  void begin_fiber(int) override { commit(); }
+  void begin_cluster(const std::vector<int> &, const std::vector<int> &) override { commit(); }
+  Vec3 take_total(double &min_gap) {
+    double stiffness = 0.0;
+    return take_total(min_gap, stiffness);
+  }
+  // ... and the summed normal contact stiffness -dF/dh of those contacts (N/m; with
+  // track_stiffness(true) only, else 0): an upper bound of the stiffness the bodies feel through
+  // the fibers (the fibers are in series with it); the press servo limits its gain with it.
+  Vec3 take_total(double &min_gap, double &stiffness) {
+    commit();
+    const Vec3 t = total_;
+    min_gap = total_min_gap_;
+    stiffness = total_stiff_;
+    total_ = {0, 0, 0};
+    total_min_gap_ = std::numeric_limits<double>::infinity();
+    total_stiff_ = 0.0;
+    return t;
+  }
+  void track_stiffness(bool on) { track_stiff_ = on; }
+
  protected:
   void reset() {
     near_.clear();
     contacts_ = 0;
     min_gap_ = std::numeric_limits<double>::max();
+    eval_sum_ = {0, 0, 0};
+    eval_stiff_ = 0.0;
+    evaluated_ = true;
+  }
+  void commit() {
+    if (!evaluated_) return;
+    total_ = total_ + eval_sum_;
+    total_stiff_ += eval_stiff_;
+    if (!near_.empty()) total_min_gap_ = std::min(total_min_gap_, min_gap_);
+    eval_sum_ = {0, 0, 0};
+    eval_stiff_ = 0.0;
+    evaluated_ = false;
   }
 
   // one contact point: element a-b (b < 0: node a) at the hit
@@ -290,9 +327,12 @@ class BodyContactModel : public rod::NodeForceModel {
     }
     F[static_cast<std::size_t>(a)] = F[static_cast<std::size_t>(a)] + wa * fp;
     if (B) F[static_cast<std::size_t>(b)] = F[static_cast<std::size_t>(b)] + wb * fp;
-    if (!J) return;
+    eval_sum_ = eval_sum_ + fp;
+    if (!J && !track_stiff_) return;
     const double dh = 1e-3 * law_.steric.h_R;
     const double dFdh = (pl.force(hit.h + dh, u) - pl.force(hit.h - dh, u)) / (2.0 * dh);
+    if (track_stiff_) eval_stiff_ += std::max(0.0, -dFdh);
+    if (!J) return;
     const double du = 1e-6 + 1e-4 * std::fabs(u);
     const double dFdu = (pl.force(hit.h, u + du) - pl.force(hit.h, u - du)) / (2.0 * du);
     // friction by its secant coefficient (the consistent derivative, measured: Newton failed in the
@@ -325,6 +365,11 @@ class BodyContactModel : public rod::NodeForceModel {
   std::vector<Near> near_;
   int contacts_ = 0;
   double min_gap_ = 0.0;
+  Vec3 eval_sum_{0, 0, 0}, total_{0, 0, 0};
+  double eval_stiff_ = 0.0, total_stiff_ = 0.0;
+  bool track_stiff_ = false;
+  double total_min_gap_ = std::numeric_limits<double>::infinity();
+  bool evaluated_ = false;
 };
 
 // Contact of one fiber with the static bodies inside its implicit step (see the file comment).

@@ -14,12 +14,13 @@ from .particles import DemoParticles
 from .permeability import PermeabilityStage
 from .generate import Generate
 from .laydown import Laydown
+from .press import Press
 
 __all__ = ["STAGES", "Outcome", "Stage", "StageContext", "stage"]
 
 #: Every stage by CLI name, in pipeline order.
 STAGES: dict[str, Stage] = {s.name: s for s in (DemoParticles(), Generate(), FabricStage(), FlowStage(),
-                                               Laydown(), PermeabilityStage())}
+                                               Laydown(), Press(), PermeabilityStage())}
 
 
 def stage(name: str) -> Stage:

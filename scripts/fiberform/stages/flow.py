@@ -45,10 +45,10 @@ from ..openfoam_case import (
     BoxSetup, CaseResult, plot_section, run_case, template_hash, voxel_fraction,
     write_solver_record,
 )  # fmt: skip
+from ..products import FABRIC_H5, read_fabric_image
 from ..provenance import file_hash, write_dataset
 from ..scene import FlowSection, FluidSection, Scene
 from ._stage import Stage, StageContext
-from .fabric import FabricStage, read_fabric_image
 
 __all__ = [
     "FlowResult",
@@ -295,7 +295,7 @@ class FlowStage(Stage):
         return problems
 
     def _fabric_h5(self, ctx: StageContext) -> Path:
-        return ctx.scene.output_path / FabricStage.folder / FabricStage.products[0]
+        return ctx.scene.output_path / FABRIC_H5
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)

@@ -30,8 +30,8 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..fabric_geometry import segment_distances
-from ..fiber_io import Fiber, quat_from_frames, write_fibers_liggghts
-from ..inputs import STAR, LiggghtsInput, Token, file_token
+from ..fiber_io import DATA_NAME, NODES_NAME, Fiber, fiber_preamble, quat_from_frames, write_fibers_liggghts
+from ..inputs import LiggghtsInput
 from ..provenance import file_hash, write_dataset
 from ._stage import Stage, StageContext
 
@@ -47,8 +47,6 @@ __all__ = [
 
 Array = npt.NDArray[np.float64]
 H5_NAME = "fibers.h5"
-DATA_NAME = "fibers.data"
-NODES_NAME = "fibers.nodes"
 INPUT_NAME = "in.fibers"
 
 # ------------------------------------------------------------------------------------------------
@@ -419,35 +417,6 @@ def _sampler_spec(section: Any, name: str, fallback: float | None) -> dict[str, 
             raise StageError(f"fiber_generation.{name}: required")
         return {"kind": "fixed", "value": fallback}
     return spec.model_dump(exclude_none=True) if hasattr(spec, "model_dump") else dict(spec)
-
-
-def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,
-                   restart: Token | None = None, flat_decomposition: bool = False) -> None:
-    """The LIGGGHTS commands that load the generated fibers (DATA_NAME, NODES_NAME in the working
-    folder) under fix fiber/beam with ID ``beam``; ``beam_options`` are appended to that fix.
-    With ``restart`` (a restart file of an earlier run of the same input) the atoms, the box and
-    the per-atom state of fix fiber/beam come from that file instead of DATA_NAME (units, atom
-    style, boundary and newton are stored in it). ``flat_decomposition``: MPI ranks split the box
-    in x and y only (a sheet is a thin layer: a split in z would leave it on one rank)."""
-    s.command("units", "si")
-    if flat_decomposition:
-        s.command("processors", STAR, STAR, 1)
-    if restart is None:
-        s.command("atom_style", "sphere")
-    s.command("atom_modify", "map", "array", "sort", 0, 0.0)
-    if restart is None:
-        s.command("boundary", "f", "f", "f")
-        s.command("newton", "on" if newton else "off")
-        s.command("communicate", "single", "vel", "yes")
-        s.command("read_data", file_token(DATA_NAME))
-    else:
-        s.command("read_restart", restart)
-        s.command("communicate", "single", "vel", "yes")
-    s.command("neighbor", 0.1 * f.width_m, "bin")
-    s.command("neigh_modify", "delay", 0)
-    s.command("fix", "beam", "all", "fiber/beam", "nodes", file_token(NODES_NAME),
-              "E", f.youngs_modulus_Pa, "G", f.shear_modulus_Pa, "density", f.density_kg_m3,
-              *beam_options)
 
 
 def build_input(scene: Any, dt: float) -> str:

@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..inputs import STAR, LiggghtsInput, dump_format, file_token
+from ..liggghts_log import Frame, read_dump
 from ..provenance import file_hash, text_hash, write_dataset
 from ..runner import build_command, liggghts_progress, run
 from ..scene import DemoParticlesSection, RunSection, Scene
@@ -201,51 +202,6 @@ def build_input(scene: Scene) -> str:
     s.blank()
     s.command("run", steps)
     return s.render()
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One snapshot of a LAMMPS/LIGGGHTS text dump, rows sorted by atom id."""
-
-    step: int
-    ids: npt.NDArray[np.int64]
-    columns: dict[str, npt.NDArray[np.float64]]
-
-
-def read_dump(path: Path) -> list[Frame]:
-    """Read every frame of a ``dump custom`` text file."""
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as exc:
-        raise StageError(f"cannot read dump {path}: {exc.strerror}") from None
-    frames: list[Frame] = []
-    i = 0
-    try:
-        while i < len(lines):
-            if not lines[i].startswith("ITEM: TIMESTEP"):
-                i += 1
-                continue
-            step = int(lines[i + 1])
-            if not lines[i + 2].startswith("ITEM: NUMBER OF ATOMS"):
-                raise ValueError("NUMBER OF ATOMS expected")
-            n = int(lines[i + 3])
-            j = i + 4
-            while not lines[j].startswith("ITEM: ATOMS"):
-                j += 1
-            names = lines[j].split()[2:]
-            rows = np.array([[float(x) for x in lines[j + 1 + k].split()] for k in range(n)])
-            rows = rows.reshape(n, len(names))
-            order = np.argsort(rows[:, names.index("id")], kind="stable")
-            rows = rows[order]
-            cols = {name: rows[:, c] for c, name in enumerate(names)}
-            ids = cols.pop("id").astype(np.int64)
-            frames.append(Frame(step, ids, cols))
-            i = j + 1 + n
-    except (IndexError, ValueError) as exc:
-        raise StageError(f"malformed dump {path} near line {i + 1}: {exc}") from None
-    if not frames:
-        raise StageError(f"dump {path} holds no frame")
-    return frames
 
 
 def _xyz(frame: Frame, prefix: str) -> npt.NDArray[np.float64]:

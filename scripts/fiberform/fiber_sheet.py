@@ -1,0 +1,287 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Shared machinery of the stages that simulate the sheet of fibers on the fabric in LIGGGHTS
+(``laydown``, ``press``): the contact commands (yarns, side planes, fiber-fiber pair style), the
+yarn file, the sheet's geometric measures (gaps, clearances, thickness, solid fraction) and its
+pictures. Stages import this module, never each other (docs/stages/pipeline.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+
+from .fabric_geometry import segment_distances
+from .inputs import STAR, LiggghtsInput, file_token, ident_list
+from .scene import Scene
+
+Array = npt.NDArray[np.float64]
+
+# fix wall/gran material (stock Hertz model): soft enough for the fiber time step, frictionless as
+# the yarns; one atom type
+WALL_GRAN_MATERIAL: tuple[tuple[str, str, tuple[object, ...]], ...] = (
+    ("wallmat1", "youngsModulus", ("peratomtype", 1.0e7)),
+    ("wallmat2", "poissonsRatio", ("peratomtype", 0.3)),
+    ("wallmat3", "coefficientRestitution", ("peratomtypepair", 1, 0.5)),
+    ("wallmat4", "coefficientFriction", ("peratomtypepair", 1, 0.0)),
+)
+
+
+def contact_integrator_words(ld: Any, wall: bool) -> list[object]:
+    """The yarn/wall contact integrator keywords: fix wall/fiber/dlvo takes `integrator cvode` or
+    `integrator substep N`; fix fiber/yarns `integrator cvode|substep` and `substeps N`."""
+    if ld.contact_integrator == "cvode":
+        return ["integrator", "cvode"]
+    if wall:
+        return ["integrator", "substep", ld.contact_substeps]
+    return ["integrator", "substep", "substeps", ld.contact_substeps]
+
+
+def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
+    """pair_style fiber/dlvo keywords from the scene's contact section; mode: laydown.fiber_contact
+    (newton: the contacts inside the fibers' Newton solves, no sub-integration keywords)."""
+    c = scene.contact
+    assert c is not None
+    out: list[object]
+    if mode == "newton":
+        out = ["implicit_force", "newton"]
+    else:
+        out = ["integrator", c.integrator]
+        if c.integrator == "substep":
+            out.append(c.substeps)
+    out += ["terms", ident_list(c.terms)]
+    if c.hamaker_J is not None:
+        out += ["hamaker", c.hamaker_J]
+    if c.ionic_strength_mol_m3 is not None:
+        out += ["ionic_strength", c.ionic_strength_mol_m3]
+    if c.surface_potential_V is not None:
+        out += ["psi", c.surface_potential_V]
+    if c.cutoff_m is not None:
+        out += ["h_cut", c.cutoff_m]
+    if c.points_per_element is not None and mode != "newton":
+        out += ["points", c.points_per_element]
+    return out
+
+
+def side_planes(scene: Scene) -> list[tuple[float, ...]]:
+    """The four vertical side planes of the domain: point x, y, z and inward normal."""
+    dom = scene.domain
+    assert dom is not None
+    lo, hi = dom.lo_m, dom.hi_m
+    return [
+        (lo[0], 0.0, 0.0, 1.0, 0.0, 0.0), (hi[0], 0.0, 0.0, -1.0, 0.0, 0.0),
+        (0.0, lo[1], 0.0, 0.0, 1.0, 0.0), (0.0, hi[1], 0.0, 0.0, -1.0, 0.0),
+    ]
+
+
+def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str,
+                     yarn_extra: list[object]) -> None:
+    """The sheet's contacts, as the laydown section sets them: the side planes (``walls``), fix
+    fiber/yarns ``yarns`` on the yarns of ``yarns_file`` (plus ``yarn_extra`` keywords: removal,
+    settle counter) and, with a contact section, pair_style fiber/dlvo between fibers."""
+    ld = scene.laydown
+    assert ld is not None
+    planes = side_planes(scene)
+    terms = ident_list(ld.terms)
+    plane_args: list[object] = []
+    if ld.walls == "fiber_yarns":
+        for p in planes:
+            plane_args += ["plane", *p]
+    elif ld.walls == "wall_gran":  # stock LIGGGHTS granular walls (comparison option)
+        for name, style, value in WALL_GRAN_MATERIAL:
+            s.command("fix", name, "all", "property/global", style, *value)
+        for k, p in enumerate(planes):
+            axis = "xplane" if p[3] != 0.0 else "yplane"
+            s.command("fix", f"wall{k}", "all", "wall/gran", "model", "hertz", "tangential",
+                      "no_history", "primitive", "type", 1, axis, p[0] if p[3] != 0.0 else p[1])
+    else:  # the contact styles' own wall fix, one per plane
+        for k, p in enumerate(planes):
+            s.command("fix", f"wall{k}", "all", "wall/fiber/dlvo", "plane", *p, "terms", terms,
+                      *contact_integrator_words(ld, wall=True))
+    s.command("fix", "yarns", "all", "fiber/yarns", "yarns", file_token(yarns_file), *plane_args,
+              *yarn_extra, *contact_integrator_words(ld, wall=False),
+              "implicit_force", "newton" if ld.yarn_contact_mode == "newton" else "impulse",
+              "terms", terms, "friction", ld.friction_coefficient)
+    c = scene.contact
+    if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
+        s.command("pair_style", "fiber/dlvo", *pair_options(scene, ld.fiber_contact_mode))
+        s.command("pair_coeff", STAR, STAR)
+
+
+
+def write_yarns(path: Path, fabric_h5: Path) -> tuple[Array, Array, Array]:
+    """The fabric's yarn centrelines as fix fiber/yarns reads them: ``yarn x y z radius``."""
+    with h5py.File(fabric_h5, "r") as h5:
+        pts = np.asarray(h5["yarns/points"][...], dtype=float)
+        offs = np.asarray(h5["yarns/offsets"][...], dtype=np.int64)
+        rad = np.asarray(h5["yarns/radius"][...], dtype=float)
+    with open(path, "w") as fh:
+        fh.write("# yarn-index x y z radius (m), from fabric.h5 /yarns\n")
+        for k in range(len(rad)):
+            for p in pts[offs[k]:offs[k + 1]]:
+                fh.write(f"{k} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} {float(rad[k])!r}\n")
+    return pts, offs, rad
+
+
+def yarn_distances(x: Array, pts: Array, offs: Array, rad: Array) -> Array:
+    """For each point of x (n, 3): min over yarns of (distance to the centreline - radius), m."""
+    a, b, r = _yarn_segments(pts, offs, rad)
+    out = np.full(len(x), np.inf)
+    d = b - a
+    dd = np.einsum("ij,ij->i", d, d)
+    for i, p in enumerate(x):
+        t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+        dist = np.linalg.norm(p - (a + t[:, None] * d), axis=1) - r
+        out[i] = float(dist.min())
+    return out
+
+
+def _yarn_segments(pts: Array, offs: Array, rad: Array) -> tuple[Array, Array, Array]:
+    a = np.vstack([pts[offs[k]:offs[k + 1] - 1] for k in range(len(rad))])
+    b = np.vstack([pts[offs[k] + 1:offs[k + 1]] for k in range(len(rad))])
+    r = np.concatenate([np.full(offs[k + 1] - offs[k] - 1, rad[k]) for k in range(len(rad))])
+    return a, b, r
+
+
+def _all_pairs(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
+    """Distances between every segment p1-q1 (n, 3) and every segment p2-q2 (m, 3): (n, m)."""
+    return segment_distances(p1[:, None, :], q1[:, None, :], p2[None, :, :], q2[None, :, :])
+
+
+def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Array) -> float:
+    """Smallest (distance between a fiber element's centre line and a yarn segment's centre line -
+    yarn radius) over all elements and yarn segments, m (< 0: a fiber centre line inside a yarn)."""
+    ends = [(offsets[k], offsets[k + 1]) for k in range(len(offsets) - 1)]
+    idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in ends if hi - lo > 1] or
+                         [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+    if len(idx) == 0:
+        return math.inf
+    a, b, r = _yarn_segments(pts, offs, rad)
+    out = math.inf
+    for chunk in np.array_split(idx, max(1, len(idx) // 200)):
+        d = _all_pairs(x[chunk], x[chunk + 1], a, b) - r[None, :]
+        out = min(out, float(d.min()))
+    return out
+
+
+def fiber_fiber_gap(x: Array, offsets: Array, radius: Array) -> float:
+    """Smallest surface gap between elements of DIFFERENT fibers, m: centre-line distance minus
+    the radii of both elements (an element's radius: the larger of its nodes' ``radius``, one per
+    row of x). The contact law keeps it above about -10 nm; below -(radius) a centre line is
+    inside another fiber (a pass-through). inf with fewer than two fibers."""
+    owner = np.concatenate([np.full(max(0, hi - lo - 1), k) for k, (lo, hi) in
+                            enumerate(zip(offsets[:-1], offsets[1:]))] or [np.zeros(0)]).astype(np.int64)
+    idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])
+                          if hi - lo > 1] or [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+    if len(idx) < 2 or len(np.unique(owner)) < 2:
+        return math.inf
+    r_el = np.maximum(radius[idx], radius[idx + 1])
+    out = math.inf
+    for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
+        d = _all_pairs(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+        d = d - r_el[chunk][:, None] - r_el[None, :]
+        d[owner[chunk][:, None] == owner[None, :]] = math.inf
+        out = min(out, float(d.min()))
+    return out
+
+
+def frame_fibers(columns: Mapping[str, Any]) -> tuple[Array, Array, Array]:
+    """Node positions of a dump frame ordered by fiber then node, with the fiber IDs (0-based)
+    and the offsets of each fiber's nodes."""
+    fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64) - 1
+    order = np.lexsort((np.rint(np.asarray(columns["f_beam[2]"])), fid))
+    x = np.stack([np.asarray(columns[c])[order] for c in ("x", "y", "z")], axis=1)
+    fids = fid[order]
+    present, counts = np.unique(fids, return_counts=True)
+    return x, present, np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def max_fiber_speed(columns: Mapping[str, Any]) -> float:
+    """Largest centre-of-mass speed of the fibers of a dump frame, m/s."""
+    fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64)
+    m = np.asarray(columns["mass"], dtype=float)
+    _, inv = np.unique(fid, return_inverse=True)
+    msum = np.bincount(inv, weights=m)
+    v = np.stack([np.bincount(inv, weights=m * np.asarray(columns[c])) for c in ("vx", "vy", "vz")], 1)
+    return float(np.max(np.linalg.norm(v / msum[:, None], axis=1)))
+
+
+def solid_fraction_profile(x: Array, offsets: Array, radius: Array, edges: Array,
+                           area: float, samples: int = 4) -> Array:
+    """Solid fraction of the fibers per height bin (``edges`` ascending, m): fiber volume in the
+    bin / (bin height x ``area``). Each element is cut into ``samples`` pieces treated as
+    horizontal cylinders of the element's radius (the larger of its nodes' ``radius``): a piece of
+    length l at height z_c holds dV/dz = 2 l sqrt(r^2 - (z - z_c)^2), integrated over each bin
+    exactly (inclined elements: their pieces follow the slope)."""
+    out = np.zeros(len(edges) - 1)
+    for lo, hi in zip(offsets[:-1], offsets[1:]):
+        if hi - lo < 2:
+            continue
+        a, b = x[lo:hi - 1], x[lo + 1:hi]
+        r = np.maximum(radius[lo:hi - 1], radius[lo + 1:hi])
+        length = np.linalg.norm(b - a, axis=1) / samples
+        for q in range(samples):
+            zc = a[:, 2] + (q + 0.5) / samples * (b[:, 2] - a[:, 2])
+            # volume of a horizontal cylinder below height z: l * (r^2 acos(-u) + r u sqrt(...)),
+            # u = (z - zc) / r clipped to [-1, 1]; the bin's share is the difference at its edges
+            u = np.clip((edges[None, :] - zc[:, None]) / r[:, None], -1.0, 1.0)
+            below = length[:, None] * r[:, None] ** 2 * (np.arccos(-u) + u * np.sqrt(1.0 - u * u))
+            out += np.sum(np.diff(below, axis=1), axis=0)
+    return out / (np.diff(edges) * area)
+
+
+def sheet_thickness(z: Array, diameter: float) -> float:
+    """Thickness estimate of the sheet: the 5-95 % range of node heights plus one fiber diameter
+    (robust against single fibers hanging in openings or lying on top)."""
+    if len(z) == 0:
+        return 0.0
+    return float(np.percentile(z, 95) - np.percentile(z, 5) + diameter)
+
+
+def write_sheet_vtu(path: Path, x: Array, fiber: Array, offsets: Array) -> None:
+    from pyevtk.hl import polyLinesToVTK
+
+    base = path.parent / "sheet_tmp"
+    counts = np.diff(offsets).astype(np.int64)
+    polyLinesToVTK(str(base), np.ascontiguousarray(x[:, 0]), np.ascontiguousarray(x[:, 1]),
+                   np.ascontiguousarray(x[:, 2]), pointsPerLine=counts,
+                   pointData={"fiber_id": np.ascontiguousarray(fiber.astype(np.float64))})
+    Path(str(base) + ".vtu").replace(path)
+
+
+def write_sheet_png(path: Path, x: Array, offsets: Array, pts: Array, offs: Array, rad: Array,
+               title: str, box: tuple[list[float], list[float]]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 5))
+    for k in range(len(rad)):
+        p = pts[offs[k]:offs[k + 1]]
+        lw = max(0.5, 2 * rad[k] / (box[1][0] - box[0][0]) * 300)
+        ax1.plot(p[:, 0] * 1e3, p[:, 2] * 1e3, color="0.75", lw=lw, solid_capstyle="round", zorder=1)
+        ax2.plot(p[:, 0] * 1e3, p[:, 1] * 1e3, color="0.8", lw=lw, solid_capstyle="round", zorder=1)
+    cmap = plt.get_cmap("tab20")
+    for k in range(len(offsets) - 1):
+        p = x[offsets[k]:offsets[k + 1]]
+        ax1.plot(p[:, 0] * 1e3, p[:, 2] * 1e3, color=cmap(k % 20), lw=1.5, zorder=2)
+        ax2.plot(p[:, 0] * 1e3, p[:, 1] * 1e3, color=cmap(k % 20), lw=1.5, zorder=2)
+    ax1.set(xlabel="x (mm)", ylabel="z (mm)", title="side view (x-z), fabric in grey",
+            xlim=(box[0][0] * 1e3, box[1][0] * 1e3))
+    ax2.set(xlabel="x (mm)", ylabel="y (mm)", title="top view (x-y)", aspect="equal",
+            xlim=(box[0][0] * 1e3, box[1][0] * 1e3), ylim=(box[0][1] * 1e3, box[1][1] * 1e3))
+    if len(x):
+        zlo = min(float(pts[:, 2].min()), float(x[:, 2].min()))
+        zhi = max(float(pts[:, 2].max()), float(x[:, 2].max()))
+        pad = 0.1 * (zhi - zlo + 1e-4)
+        ax1.set_ylim((zlo - pad) * 1e3, (zhi + pad) * 1e3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)

@@ -1,0 +1,565 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Stage ``press``: the laid-down sheet is pressed by a rigid horizontal plate (Kettil 2016 sec.
+3.5, and beyond it: the plate force is computed, so the press can follow a pressure).
+
+fiberdem continues from the lay-down's final state (``laydown/sheet.restart``: atoms and per-atom
+states of fix fiber/beam) with the water at rest (fix fiber/drag with zero flow: drag, gravity
+and buoyancy stay), the same yarn and side-plane contacts and fiber-fiber pair style as the
+lay-down, and a plate: fix wall/fiber/dlvo with the plane's normal pointing down, under the
+laydown section's contact terms and integrator.
+
+- ``press.mode: velocity`` (thesis): the plate moves down at ``plate_speed_m_s`` until it is
+  ``target_thickness_m`` above the fabric top, then rests for ``hold_time_s``.
+- ``press.mode: pressure``: the fix's servo (docs/models/press.md) drives the plate so that the
+  contact pressure (plate force / domain cross-section) follows a ramp to ``target_pressure_Pa``,
+  a hold, an unloading and a release at zero pressure; the schedule's clock starts at the first
+  contact.
+
+At every ``output_interval_s``: a snapshot of the nodes, the plate's position and force, the
+overlap guard (the run ends when an element overlaps another fiber, a yarn or the plate by more
+than ``overlap_limit`` x the thinner fiber's thickness; the stage then fails with exit status 1).
+
+Products in ``<output_dir>/press/``: ``press.h5`` (curve, profiles, final sheet, provenance),
+``sheet.vtu``, ``press.png``, ``curve.png``, ``report.md``, ``sheet.restart`` (the pressed state).
+Page: docs/stages/press.md.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..errors import ConfigError, SceneError, StageError
+from ..fiber_io import NODES_NAME, fiber_preamble, write_nodes_subset
+from ..fiber_sheet import (
+    Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
+    frame_fibers, sheet_thickness, solid_fraction_profile, write_sheet_png, write_sheet_vtu,
+    write_yarns,
+)
+from ..inputs import LiggghtsInput, dump_format, file_token, fix_ref, ident_list, jump_if_at_least
+from ..liggghts_log import read_dump, thermo_rows
+from ..products import (
+    FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, read_fiber_outer_axes, read_sheet,
+    read_yarns,
+)
+from ..provenance import file_hash, write_dataset
+from ..runner import liggghts_progress, run
+from ..scene import FluidSection, PressSection, Scene
+from ._stage import Stage, StageContext
+
+__all__ = ["Press", "PressPlan", "build_input", "plan"]
+
+H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME = "press.h5", "sheet.vtu", "press.png", "curve.png"
+REPORT_NAME, RESTART_NAME = "report.md", "sheet.restart"
+INPUT_NAME, LOG_NAME, TRAJ_NAME, YARNS_NAME = "in.press", "log.fiberdem", "traj.dump", "yarns.txt"
+START_NAME = "laydown.restart"
+END_LABEL, GUARD_MARKER = "press_end", "FIBERFORM_OVERLAP"
+#: the solid-fraction thickness: the height range where the profile exceeds this share of its maximum
+PHI_SHARE = 0.1
+#: thermo columns (the order of thermo_style in build_input)
+COLUMNS = ("step", "atoms", "fx", "fy", "fz", "disp", "speed", "p_servo", "p_target", "t_contact",
+           "h_plate", "h_yarn", "h_pair", "at_stop", "yarn_fx", "yarn_fy", "yarn_fz")
+
+
+class PressPlan:
+    """The numbers of one press run, from the scene and the lay-down's sheet."""
+
+    def __init__(self, scene: Scene, sheet_top: float, fabric_top: float, t_min: float,
+                 start_overlap: tuple[float, float] = (0.0, 0.0)) -> None:
+        pr, ld, dom = scene.press, scene.laydown, scene.domain
+        assert pr is not None and ld is not None and dom is not None
+        self.dt = pr.timestep_s if pr.timestep_s is not None else ld.timestep_s
+        self.every = max(1, round(pr.output_interval_s / self.dt))
+        self.z0 = sheet_top + pr.plate_start_gap_m
+        self.fabric_top = fabric_top
+        self.area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
+        self.centre = (0.5 * (dom.lo_m[0] + dom.hi_m[0]), 0.5 * (dom.lo_m[1] + dom.hi_m[1]))
+        self.t_min = t_min
+        # the overlaps the lay-down left (m, >= 0): fiber-fiber (averaged contact lets fibers
+        # pass through each other) and fiber-yarn; the guard ends the run when the press adds
+        # more than overlap_limit x the thinner fiber's thickness to either
+        self.start_overlap_fiber, self.start_overlap_yarn = start_overlap
+        self.guard = pr.overlap_limit * t_min
+        self.guard_fiber = self.start_overlap_fiber + self.guard
+        self.guard_yarn = self.start_overlap_yarn + self.guard
+        # the plate never passes the fabric top (it would rest on the yarn knuckles)
+        self.stop = self.z0 - fabric_top
+        if pr.mode == "velocity":
+            assert pr.target_thickness_m is not None
+            travel = self.z0 - (fabric_top + pr.target_thickness_m)
+            if travel <= 0.0:
+                raise SceneError("press", [
+                    f"press.target_thickness_m: {pr.target_thickness_m:g} m is not below the "
+                    f"laid-down sheet: the plate starts {(self.z0 - fabric_top):.4g} m above the "
+                    f"fabric top (sheet top {sheet_top:.6g} m + plate_start_gap_m); allowed: "
+                    f"0 < target_thickness_m < {(self.z0 - fabric_top):.4g}"])
+            # whole outputs: the plate stops exactly at the target after a whole number of
+            # output intervals, at plate_speed_m_s or slightly slower
+            self.move_steps = self.every * math.ceil(travel / (pr.plate_speed_m_s * self.dt) / self.every)
+            self.speed = travel / (self.move_steps * self.dt)
+            self.z_end = fabric_top + pr.target_thickness_m
+            self.hold_steps = self.every * math.ceil(round(pr.hold_time_s / self.dt) / self.every)
+            self.schedule: list[tuple[float, float]] = []
+            total = self.move_steps + self.hold_steps
+        else:
+            assert pr.target_pressure_Pa is not None
+            p, ramp = pr.target_pressure_Pa, pr.target_pressure_Pa / pr.rate
+            self.schedule = [(0.0, 0.0), (ramp, p), (ramp + pr.hold_time_s, p),
+                             (2 * ramp + pr.hold_time_s, 0.0)]
+            approach = pr.plate_start_gap_m / pr.plate_speed_m_s
+            t_end = approach + 2 * ramp + pr.hold_time_s + pr.release_time_s
+            self.move_steps = self.every * math.ceil(t_end / self.dt / self.every)
+            self.speed = pr.plate_speed_m_s
+            self.hold_steps = 0
+            self.z_end = math.nan
+            total = self.move_steps
+        self.total_steps = total
+        if total > 10**8:
+            raise SceneError("press", ["press: more than 1e8 steps (timestep_s too small for the "
+                                       "press's duration)"])
+
+
+def plan(scene: Scene, root: Path) -> PressPlan:
+    """The press plan of a scene whose lay-down products are under ``root`` (the output folder)."""
+    sheet = read_sheet(root / LAYDOWN_H5)
+    if len(sheet.x) == 0:
+        raise StageError(f"{root / LAYDOWN_H5}: no fiber on the sheet: nothing to press")
+    axes = read_fiber_outer_axes(root / FIBERS_H5, sheet.fiber_id)
+    r_node = np.max(axes, axis=1)
+    t_min = float(2.0 * np.min(axes))  # the thinner fiber's thickness
+    yarns = read_yarns(root / FABRIC_H5)
+    # the lay-down's own overlaps (m, >= 0); the element-yarn clearance is measured from the
+    # element's centre line, so the surface overlap is the fiber radius minus the clearance
+    gap_ff, clear = sheet.min_fiber_fiber_gap, sheet.min_element_clearance
+    start = (max(0.0, -gap_ff) if math.isfinite(gap_ff) else 0.0,
+             max(0.0, float(np.max(r_node)) - clear) if math.isfinite(clear) else 0.0)
+    return PressPlan(scene, float(np.max(sheet.x[:, 2] + r_node)), yarns.top, t_min, start)
+
+
+def build_input(scene: Scene, p: PressPlan) -> str:
+    """The press's LIGGGHTS input (files in the working folder: laydown.restart, fibers.nodes,
+    yarns.txt). Every field of the press section acts through here or through PressPlan."""
+    f, ld, pr = scene.fibers, scene.laydown, scene.press
+    assert f is not None and ld is not None and pr is not None
+    fl = scene.fluid or FluidSection()
+    s = LiggghtsInput()
+    s.comment("Generated by fiberform stage press (docs/stages/press.md).")
+    fiber_preamble(s, f, scene.contact is not None,
+                   "inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
+                   "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
+                   "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
+                   "newton_max", ld.newton_max_iterations, restart=file_token(START_NAME),
+                   flat_decomposition=True)
+    # quiescent water (thesis sec. 3.5): drag against water at rest, gravity and buoyancy
+    s.command("fix", "drag", "all", "fiber/drag", "flow", "uniform", 0.0, 0.0, 0.0,
+              "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
+              "gravity", *fl.gravity_m_s2)
+    contact_commands(s, scene, YARNS_NAME, [])
+    s.command("timestep", p.dt)
+    pair = scene.contact is not None and scene.contact.model == "fiber_dlvo"
+    s.command("variable", "ovl_yarn", "equal", fix_ref("yarns", 6, negate=True))
+    s.command("variable", "ovl_plate", "equal", fix_ref("plate", 6, negate=True))
+    if pair:
+        s.command("variable", "ovl_pair", "equal", fix_ref("FIBER_DLVO_STEP", 6, negate=True))
+    s.command("dump", "traj", "all", "custom", p.every, file_token(TRAJ_NAME), "id", "mass",
+              "x", "y", "z", "vx", "vy", "vz", fix_ref("beam", 1), fix_ref("beam", 2))
+    s.command("dump_modify", "traj", "sort", "id", "format", dump_format(["int"] + ["float"] * 9))
+    s.command("thermo_modify", "lost", "ignore")
+    # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
+    plate_words: list[object] = ["terms", ident_list(ld.terms)] + (
+        ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
+        else contact_integrator_words(ld, wall=True))
+    cx, cy = p.centre
+
+    def plate(z: float, *motion: object) -> None:
+        s.command("fix", "plate", "all", "wall/fiber/dlvo", "plane", cx, cy, z, 0.0, 0.0, -1.0,
+                  *motion, "stop", max(0.0, z - p.fabric_top), *plate_words)
+
+    def thermo() -> None:
+        s.command("thermo_style", "custom", "step", "atoms",
+                  *(fix_ref("plate", k) for k in (7, 8, 9, 10, 11, 12, 13, 14, 6)),
+                  fix_ref("yarns", 6), fix_ref("FIBER_DLVO_STEP", 6) if pair else fix_ref("plate", 6),
+                  fix_ref("plate", 15), *(fix_ref("yarns", k) for k in (9, 10, 11)))
+        s.command("thermo", p.every)
+
+    started: list[bool] = []
+
+    def chunks(steps: int, first: bool) -> None:
+        done = 0
+        while done < steps:
+            n = min(p.every, steps - done)
+            if first and done == 0:
+                if not started:
+                    # outputs at whole output intervals from the press's start (LIGGGHTS wants it
+                    # right before a run after read_restart)
+                    s.command("reset_timestep", 0)
+                    started.append(True)
+                s.command("run", n)
+            else:
+                s.command("run", n, "pre", "no", "post", "no")
+            done += n
+            guards = [("ovl_yarn", p.guard_yarn), ("ovl_plate", p.guard)]
+            if pair:
+                guards.append(("ovl_pair", p.guard_fiber))
+            for var, bound in guards:
+                s.command("if", *jump_if_at_least(var, bound, END_LABEL, GUARD_MARKER))
+
+    if pr.mode == "velocity":
+        plate(p.z0, "velocity", 0.0, 0.0, -p.speed)
+        thermo()
+        chunks(p.move_steps, True)
+        if p.hold_steps:
+            s.command("unfix", "plate")
+            plate(p.z_end)
+            thermo()
+            chunks(p.hold_steps, True)
+    else:
+        assert pr.target_pressure_Pa is not None
+        sched: list[object] = [len(p.schedule)]
+        for t, pv in p.schedule:
+            sched += [t, pv]
+        plate(p.z0, "servo", p.area, pr.plate_speed_m_s, pr.band, *sched)
+        thermo()
+        chunks(p.move_steps, True)
+    s.label(END_LABEL)
+    s.command("write_restart", file_token(RESTART_NAME))
+    return s.render()
+
+
+def phases(mode: str, t_contact: Array, schedule: list[tuple[float, float]]) -> list[str]:
+    """The phase of each curve point: approach, loading, hold, unloading, release (pressure mode;
+    from the time since the first contact) or moving, hold (velocity mode, from the speed)."""
+    out = []
+    for t in t_contact:
+        if mode == "velocity":
+            out.append("moving" if t > 0 else "hold")  # t > 0: the plate's first fix
+        elif t < 0:
+            out.append("approach")
+        elif t <= schedule[1][0]:
+            out.append("loading")
+        elif t <= schedule[2][0]:
+            out.append("hold")
+        elif t <= schedule[3][0]:
+            out.append("unloading")
+        else:
+            out.append("release")
+    return out
+
+
+class Press(Stage):
+    """Pressing of the laid-down sheet by a rigid plate."""
+
+    name = "press"
+    summary = "press the laid-down sheet with a rigid plate (velocity- or pressure-controlled)"
+    folder = "press"
+    requires = ("domain", "fibers", "fabric", "laydown", "press")
+    uses = ("seed", "domain", "fibers", "fiber_generation", "fabric", "flow", "fluid", "laydown",
+            "contact", "press")
+    products = (H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME, REPORT_NAME, RESTART_NAME)
+    code_version = 1
+
+    def _upstream(self, ctx: StageContext) -> dict[str, Path]:
+        root = ctx.scene.output_path
+        return {"laydown_h5": root / LAYDOWN_H5, "laydown_restart": root / LAYDOWN_RESTART,
+                "fibers_h5": root / FIBERS_H5, "fibers_nodes": root / FIBERS_NODES,
+                "fabric_h5": root / FABRIC_H5}
+
+    def check_scene(self, scene: Scene) -> list[str]:
+        problems = super().check_scene(scene)
+        if problems:
+            return problems
+        pr, ld = scene.press, scene.laydown
+        assert pr is not None and ld is not None
+        if pr.ranks > 1 and ld.yarn_contact_mode != "newton":
+            problems.append("press.ranks: more than one rank needs laydown.yarn_contact newton")
+        dt = pr.timestep_s if pr.timestep_s is not None else ld.timestep_s
+        if dt > pr.output_interval_s:
+            problems.append(f"press.output_interval_s: must be at least the time step ({dt:g} s)")
+        return problems
+
+    def input_hashes(self, ctx: StageContext) -> dict[str, str]:
+        h = super().input_hashes(ctx)
+        for key, path in self._upstream(ctx).items():
+            if path.is_file():
+                h[key] = file_hash(path)
+        exe = ctx.build_dir / "bin" / "fiberdem"
+        if exe.is_file():
+            h["fiberdem"] = file_hash(exe)
+        return h
+
+    def preflight(self, ctx: StageContext) -> None:
+        for key, path in self._upstream(ctx).items():
+            if not path.is_file():
+                raise ConfigError(f"press: {path} missing ({key}): run the lay-down first "
+                                  "(`fiberform laydown SCENE`, or `fiberform run SCENE`)")
+        if not (ctx.build_dir / "bin" / "fiberdem").is_file():
+            raise StageError(f"{ctx.build_dir / 'bin' / 'fiberdem'} not found: build first")
+        plan(ctx.scene, ctx.scene.output_path)  # a target thickness above the sheet: exit 2 now
+
+    def produce(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path],
+                hashes: Mapping[str, str]) -> None:
+        scene = ctx.scene
+        pr, dom = scene.press, scene.domain
+        assert pr is not None and dom is not None
+        up = self._upstream(ctx)
+        p = plan(scene, scene.output_path)
+        work = self.stage_dir(ctx) / "work"
+        if work.exists():
+            shutil.rmtree(work)
+        work.mkdir(parents=True)
+        shutil.copyfile(up["laydown_restart"], work / START_NAME)
+        # the fibers left on the sheet (the lay-down may have removed some)
+        write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
+                           read_sheet(up["laydown_h5"]).fiber_id.tolist())
+        pts, offs, rad = write_yarns(work / YARNS_NAME, up["fabric_h5"])
+        (work / INPUT_NAME).write_text(build_input(scene, p))
+        t0 = time.monotonic()
+        run([str((ctx.build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log", "none"],
+            Path(LOG_NAME), cwd=work, ranks=pr.ranks, progress=liggghts_progress(p.total_steps),
+            oversubscribe=ctx.oversubscribe, description="fiberdem press",
+            show_progress=ctx.show_progress)
+        wall = time.monotonic() - t0
+        log = (work / LOG_NAME).read_text(errors="replace")
+        if any(line.strip() == GUARD_MARKER for line in log.splitlines()):
+            rows = thermo_rows(log)
+            last = dict(zip(COLUMNS, rows[-1])) if rows else {}
+            # overlap added by the press, per kind (m): the guard's measure
+            added = {"another fiber": -last.get("h_pair", 1.0) - p.start_overlap_fiber,
+                     "a yarn": -last.get("h_yarn", 1.0) - p.start_overlap_yarn,
+                     "the plate": -last.get("h_plate", 1.0)}
+            worst = max(added.items(), key=lambda kv: kv[1])
+            raise StageError(
+                f"press: overlap guard: at step {int(last.get('step', -1))} the press has pushed an "
+                f"element {worst[1] * 1e6:.3g} um = {worst[1] / p.t_min:.2f} x the thinner fiber's "
+                f"thickness ({p.t_min * 1e6:.3g} um) into {worst[0]} (beyond the lay-down's own "
+                f"overlap), above press.overlap_limit {pr.overlap_limit:g}: the contact law cannot "
+                f"carry this load (lower target_pressure_Pa or plate_speed_m_s, raise "
+                f"target_thickness_m, or a smaller timestep_s; docs/stages/press.md, limits); "
+                f"snapshots up to there: {work / TRAJ_NAME}")
+        self._collect(ctx, h5, tmp, p, work, (pts, offs, rad), wall)
+
+    def _collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], p: PressPlan,
+                 work: Path, yarns: tuple[Array, Array, Array], wall: float) -> None:
+        scene = ctx.scene
+        pr, dom, f = scene.press, scene.domain, scene.fibers
+        assert pr is not None and dom is not None and f is not None
+        pts, offs, rad = yarns
+        rows = np.array(thermo_rows((work / LOG_NAME).read_text(errors="replace")), dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
+            raise StageError(f"{work / LOG_NAME}: no thermo table of {len(COLUMNS)} columns")
+        # rows of the run commands: each chunk prints its first and last step; keep one per step
+        _, first = np.unique(rows[:, 0], return_index=True)
+        rows = rows[np.sort(first)]
+        col = {name: rows[:, k] for k, name in enumerate(COLUMNS)}
+        step = col["step"].astype(np.int64)
+        step0 = int(step[0])
+        steps = step - step0
+        t = steps * p.dt
+        if pr.mode == "velocity":
+            moving = steps <= p.move_steps
+            plate_z = np.where(moving, p.z0 - col["disp"], p.z_end - col["disp"])
+            t_contact = np.where(moving, 1.0, -1.0)
+        else:
+            plate_z = p.z0 - col["disp"]
+            t_contact = col["t_contact"]
+        force = np.stack([col["fx"], col["fy"], col["fz"]], axis=1)
+        pressure = 0.0 - force[:, 2] / p.area  # the plate pushes the fibers down: F_z < 0 (no -0)
+        in_contact = np.abs(force[:, 2]) > 0.0
+        thick_plate = np.where(in_contact, plate_z - p.fabric_top, np.nan)
+        phase = phases(pr.mode, t_contact, p.schedule)
+
+        frames = {fr.step: fr for fr in read_dump(work / TRAJ_NAME)}
+        span, phi_thick, ovl_fiber, ovl_yarn, ovl_plate, profiles = [], [], [], [], [], []
+        z_lo = p.fabric_top - 4 * p.t_min
+        z_hi = p.z0 + p.t_min
+        nbins = max(8, int(math.ceil((z_hi - z_lo) / (0.25 * p.t_min))))
+        edges = np.linspace(z_lo, z_hi, nbins + 1)
+        x_last = fid_last = off_last = None
+        for k, st in enumerate(step):
+            fr = frames.get(int(st))
+            if fr is None:
+                for lst in (span, phi_thick, ovl_fiber, ovl_yarn, ovl_plate):
+                    lst.append(math.nan)
+                profiles.append(np.full(nbins, np.nan))
+                continue
+            x, present, offsets = frame_fibers(fr.columns)
+            r = np.max(read_fiber_outer_axes(ctx.scene.output_path / FIBERS_H5, present), axis=1)
+            span.append(sheet_thickness(x[:, 2], f.width_m))
+            phi = solid_fraction_profile(x, offsets, r, edges, p.area)
+            profiles.append(phi)
+            above = np.nonzero(phi >= PHI_SHARE * phi.max())[0] if phi.max() > 0 else np.zeros(0, int)
+            phi_thick.append(float(edges[above[-1] + 1] - edges[above[0]]) if len(above) else 0.0)
+            ovl_fiber.append(max(0.0, -fiber_fiber_gap(x, offsets, r)) / p.t_min)
+            clear = element_clearance(x, offsets, pts, offs, rad) - float(r.max())
+            ovl_yarn.append(max(0.0, -clear) / p.t_min)
+            ovl_plate.append(max(0.0, float(np.max(x[:, 2] + r - plate_z[k]))) / p.t_min)
+            x_last, fid_last, off_last = x, present, offsets
+        if x_last is None or fid_last is None or off_last is None:
+            raise StageError(f"{work / TRAJ_NAME}: no snapshot written")
+
+        g = h5.create_group("curve")
+        write_dataset(g, "step", steps, "1", "time step since the start of the press")
+        write_dataset(g, "time", t, "s", "simulated time since the start of the press")
+        write_dataset(g, "phase", np.array(phase, dtype="S10"), "-",
+                      "approach, loading, hold, unloading, release (pressure) or moving, hold")
+        write_dataset(g, "plate_z", plate_z, "m", "plate height")
+        write_dataset(g, "plate_force", -force, "N",
+                      "contact force on the plate (minus the force on the fibers; step average)")
+        write_dataset(g, "pressure", pressure, "Pa", "plate force / domain cross-section")
+        write_dataset(g, "target_pressure", col["p_target"], "Pa", "servo target (pressure mode)")
+        write_dataset(g, "time_since_contact", col["t_contact"] if pr.mode == "pressure"
+                      else np.full(len(t), math.nan), "s",
+                      "pressure mode: time since the plate's first contact, the servo schedule's "
+                      "clock (-1 before it); velocity mode: NaN")
+        write_dataset(g, "plate_at_stop", col["at_stop"].astype(np.int8), "1",
+                      "1 while the plate rests at the fabric top (it never passes it)")
+        write_dataset(g, "yarn_force", np.stack([col["yarn_fx"], col["yarn_fy"], col["yarn_fz"]], 1),
+                      "N", "contact force of the yarns and side planes on the fibers (last step "
+                      "before the output; yarn_contact newton only, else 0)")
+        write_dataset(g, "thickness_plate", thick_plate, "m",
+                      "plate to fabric top while the plate touches fibers (NaN otherwise)")
+        write_dataset(g, "thickness_span", np.array(span), "m",
+                      "5-95 % node-height span + one fiber width (as the lay-down)")
+        write_dataset(g, "thickness_solid_fraction", np.array(phi_thick), "m",
+                      f"height range where the solid fraction exceeds {PHI_SHARE:g} x its maximum")
+        write_dataset(g, "overlap_fiber", np.array(ovl_fiber), "1",
+                      "largest element-element overlap of two fibers / thinner fiber thickness")
+        write_dataset(g, "overlap_yarn", np.array(ovl_yarn), "1",
+                      "largest element-yarn overlap / thinner fiber thickness")
+        write_dataset(g, "overlap_plate", np.array(ovl_plate), "1",
+                      "largest node-plate overlap / thinner fiber thickness")
+        pg = h5.create_group("profiles")
+        write_dataset(pg, "z_edges", edges, "m", "bin edges of the solid-fraction profiles")
+        write_dataset(pg, "solid_fraction", np.array(profiles), "1",
+                      "fiber volume per bin / (bin height x domain cross-section), per curve point")
+        sg = h5.create_group("sheet")
+        write_dataset(sg, "x", x_last, "m", "node positions of the pressed sheet (last snapshot)")
+        write_dataset(sg, "fiber_id", fid_last.astype(np.int64), "1",
+                      "fiber IDs (index into fibers.h5 /fibers)")
+        write_dataset(sg, "offsets", off_last, "1", "fiber k owns nodes offsets[k]:offsets[k+1]")
+        rg = h5.create_group("run")
+        rg.attrs["mode"] = pr.mode
+        rg.attrs["timestep_s"] = p.dt
+        rg.attrs["plate_area_m2"] = p.area
+        rg.attrs["plate_start_z_m"] = p.z0
+        rg.attrs["fabric_top_z_m"] = p.fabric_top
+        rg.attrs["thinner_fiber_thickness_m"] = p.t_min
+        rg.attrs["start_overlap_fiber_m"] = p.start_overlap_fiber
+        rg.attrs["start_overlap_yarn_m"] = p.start_overlap_yarn
+        rg.attrs["overlap_limit"] = pr.overlap_limit
+        rg.attrs["fiberdem_wall_s"] = wall
+        rg.attrs["ranks"] = pr.ranks
+        final = work / RESTART_NAME
+        if not final.is_file():
+            raise StageError(f"{final}: fiberdem wrote no final restart file (see work/{LOG_NAME})")
+        rg.attrs["sheet_restart_sha256"] = file_hash(final)
+        shutil.copyfile(final, tmp[RESTART_NAME])
+
+        write_sheet_vtu(tmp[VTU_NAME], x_last, fid_last, off_last)
+        write_sheet_png(tmp[PNG_NAME], x_last, off_last, pts, offs, rad,
+                        f"{scene.name}: pressed sheet ({pr.mode} mode), plate at "
+                        f"{plate_z[-1] * 1e3:.4f} mm", (dom.lo_m, dom.hi_m))
+        _write_curve(tmp[CURVE_NAME], thick_plate, np.array(span), pressure, phase,
+                     f"{scene.name}: pressure vs thickness ({pr.mode} mode)")
+        summary = _summary(pr, t, pressure, thick_plate, np.array(span), np.array(phi_thick),
+                           phase, col["at_stop"] > 0.5)
+        for key, value in summary.items():
+            if isinstance(value, float):
+                rg.attrs[key] = value
+        lines = [
+            f"# Press: scene `{scene.name}`", "",
+            f"- mode {pr.mode}; plate area {p.area * 1e6:.4g} mm^2 (domain cross-section); plate "
+            f"start {p.z0 * 1e3:.4f} mm ({pr.plate_start_gap_m * 1e6:.3g} um above the sheet); "
+            f"fabric top {p.fabric_top * 1e3:.4f} mm",
+            f"- {int(steps[-1])} steps of {p.dt:g} s = {t[-1] * 1e3:.3f} ms simulated; fiberdem "
+            f"wall time {wall:.1f} s on {pr.ranks} rank(s)",
+            *[f"- {line}" for line in summary["lines"]],
+            f"- overlap guard: {pr.overlap_limit:g} x the thinner fiber's thickness "
+            f"({p.t_min * 1e6:.3g} um) added by the press to the lay-down's own overlaps "
+            f"(fiber-fiber {p.start_overlap_fiber / p.t_min:.3f}, fiber-yarn "
+            f"{p.start_overlap_yarn / p.t_min:.3f} x thickness at the start); largest overlaps "
+            f"over the run: fiber-fiber {np.nanmax(ovl_fiber):.3f}, fiber-yarn "
+            f"{np.nanmax(ovl_yarn):.3f}, plate {np.nanmax(ovl_plate):.3f} (x thickness)",
+            "", "Thickness definitions (docs/stages/press.md): plate = plate height - fabric top "
+            "while the plate touches fibers; span = 5-95 % node heights + one fiber width; solid "
+            f"fraction = height range where the profile exceeds {PHI_SHARE:g} x its maximum.", "",
+            f"Pictures: `{PNG_NAME}`, `{CURVE_NAME}`; ParaView: `{VTU_NAME}`; data: `{H5_NAME}`; "
+            f"log: `work/{LOG_NAME}`.",
+        ]
+        tmp[REPORT_NAME].write_text("\n".join(lines) + "\n")
+
+
+def _summary(pr: PressSection, t: Array, pressure: Array, thick_plate: Array, span: Array,
+             phi_thick: Array, phase: list[str], at_stop: Array) -> dict[str, object]:
+    """Key numbers of the run (floats stored as attributes) and report lines."""
+    ph = np.array(phase)
+    out: dict[str, object] = {}
+    lines = []
+    first_span = float(span[0]) if len(span) and not math.isnan(span[0]) else math.nan
+    out["thickness_span_start_m"] = first_span
+    out["thickness_span_end_m"] = float(span[-1])
+    if pr.mode == "pressure":
+        assert pr.target_pressure_Pa is not None
+        hold = ph == "hold"
+        if np.any(hold):
+            ph_hold = pressure[hold]
+            out["hold_pressure_mean_Pa"] = float(np.mean(ph_hold))
+            out["hold_pressure_max_dev"] = float(np.max(np.abs(ph_hold / pr.target_pressure_Pa - 1)))
+            out["thickness_plate_at_hold_m"] = float(np.nanmean(thick_plate[hold]))
+            lines.append(f"hold: pressure {np.mean(ph_hold):.4g} Pa (target "
+                         f"{pr.target_pressure_Pa:.4g} Pa, largest deviation "
+                         f"{out['hold_pressure_max_dev'] * 100:.2f} %); plate thickness "
+                         f"{np.nanmean(thick_plate[hold]) * 1e6:.2f} um")
+        if np.any(at_stop):
+            lines.append(f"**target pressure not reached**: the plate came down to the fabric top "
+                         f"(it rests on the yarn knuckles and never passes them) at "
+                         f"{100 * np.mean(at_stop):.0f} % of the outputs; the sheet carried at "
+                         f"most {np.max(pressure):.4g} Pa there (a sparse sheet lies partly in the "
+                         "fabric's valleys)")
+            out["plate_at_stop_fraction"] = float(np.mean(at_stop))
+        rel = ph == "release"
+        if np.any(rel):
+            out["thickness_span_after_release_m"] = float(span[rel][-1])
+            lines.append(f"spring-back: span thickness {first_span * 1e6:.2f} um before, "
+                         f"{float(span[rel][-1]) * 1e6:.2f} um at the end of the release")
+    else:
+        lines.append(f"plate stopped at {pr.target_thickness_m * 1e6 if pr.target_thickness_m else 0:.2f} "
+                     f"um above the fabric top; pressure at the end {pressure[-1]:.4g} Pa")
+    lines.append(f"span thickness {first_span * 1e6:.2f} um at the start, "
+                 f"{float(span[-1]) * 1e6:.2f} um at the end; solid-fraction thickness "
+                 f"{float(phi_thick[0]) * 1e6:.2f} -> {float(phi_thick[-1]) * 1e6:.2f} um")
+    out["lines"] = lines
+    return out
+
+
+def _write_curve(path: Path, thick_plate: Array, span: Array, pressure: Array, phase: list[str],
+                 title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    ph = np.array(phase)
+    for name, color in (("approach", "0.6"), ("moving", "C0"), ("loading", "C0"), ("hold", "C2"),
+                        ("unloading", "C3"), ("release", "C1")):
+        sel = ph == name
+        if not np.any(sel):
+            continue
+        ax1.plot(thick_plate[sel] * 1e6, pressure[sel] * 1e-3, ".", color=color, label=name)
+        ax2.plot(span[sel] * 1e6, pressure[sel] * 1e-3, ".", color=color, label=name)
+    ax1.set(xlabel="plate-to-fabric thickness (um)", ylabel="pressure (kPa)",
+            title="plate thickness (while in contact)")
+    ax2.set(xlabel="span thickness (um)", ylabel="pressure (kPa)",
+            title="5-95 % node span + fiber width")
+    ax1.legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)

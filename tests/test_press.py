@@ -1,0 +1,222 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Stage press (issue 11) on a tiny sheet: 8 fibers laid down for 6 ms on a 1 x 1 mm fabric piece
+(real stiffness and inertia, fiber-fiber contact inside the Newton solves), then pressed.
+
+- velocity mode: the plate, moved by fix wall/fiber/dlvo from its own displacement output, stops
+  exactly at ``target_thickness_m`` above the fabric top (the highest yarn point, computed here
+  from fabric.h5) and rests there for the hold;
+- pressure mode: the servo's target follows the ramp / hold / unload / release schedule computed
+  here from the scene, the plate never passes the fabric top, and the yarn reaction is reported;
+- the overlap guard stops a crafted over-pressing (plate driven fast to 1 um above the fabric top)
+  with exit status 1 and a message, leaving no press products;
+- bad press sections (negative speed, a target thickness above the sheet, no lay-down products)
+  exit 2 naming the field, and write nothing;
+- 1 and 2 MPI ranks give the same pressed sheet.
+
+The physics of the plate under load (log-cabin stack vs the continuous-beam closed form, the
+servo holding a pressure, spring-back, force balance) is tested on a stack of straight fibers in
+tests/test_press_stack.py: a sparse 1 mm^2 sheet lies partly in the fabric's valleys and carries
+almost no load before the plate reaches the fabric top.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.system
+
+NAME = "tiny_press"
+BASE = f"""
+name: {NAME}
+seed: 3
+run: {{timestep_s: 1.0e-7, duration_s: 1.0e-3}}
+domain: {{lo_m: [0.0, 0.0, 0.0], hi_m: [1.0e-3, 1.0e-3, 3.437e-3]}}
+fibers: {{count: 8, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
+         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}}
+fiber_generation: {{placement_lo_m: [0.0, 0.0, 2.66e-3], placement_hi_m: [1.0e-3, 1.0e-3, 2.76e-3]}}
+fabric: {{size_x_m: 1.0e-3, size_y_m: 1.0e-3}}
+flow: {{delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}}
+laydown: {{max_time_s: 0.006, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
+          timestep_s: 1.0e-6, friction_coefficient: 0.5}}
+contact: {{model: fiber_dlvo, terms: [steric]}}
+"""
+
+
+def _cli(cmd: list[str], args: list[str], cwd: Path, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*cmd, *args], cwd=cwd, capture_output=True, text=True, errors="replace",
+                          timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def sheet(tmp_path_factory: pytest.TempPathFactory, build_dir: Path,
+          fiberform_cmd: list[str]) -> Path:
+    """A folder with the lay-down products of the tiny scene (runs/tiny_press/...)."""
+    if not (build_dir / "bin" / "fiberdem").is_file():
+        pytest.skip("fiberdem not built")
+    work = tmp_path_factory.mktemp("press")
+    (work / "base.yaml").write_text(BASE)
+    for stage in ("generate", "fabric", "flow", "laydown"):
+        proc = _cli(fiberform_cmd, [stage, "base.yaml", "--build-dir", str(build_dir)], work)
+        assert proc.returncode == 0, stage + proc.stdout[-2000:] + proc.stderr[-3000:]
+    return work
+
+
+def _press(work: Path, cmd: list[str], build_dir: Path, press: str, name: str,
+           timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    (work / f"{name}.yaml").write_text(BASE + f"press: {press}\n")
+    return _cli(cmd, ["press", f"{name}.yaml", "--build-dir", str(build_dir)], work, timeout)
+
+
+def _fabric_top(work: Path) -> float:
+    with h5py.File(work / "runs" / NAME / "fabric" / "fabric.h5", "r") as h:
+        pts, offs, rad = h["yarns/points"][...], h["yarns/offsets"][...], h["yarns/radius"][...]
+    return float(max((pts[offs[k]:offs[k + 1], 2] + rad[k]).max() for k in range(len(rad))))
+
+
+def _sheet_top(work: Path) -> float:
+    """Highest fiber surface of the lay-down's sheet: node z + the node's larger outer half-axis."""
+    root = work / "runs" / NAME
+    with h5py.File(root / "laydown" / "laydown.h5", "r") as h:
+        x, ids = h["sheet/x"][...], h["sheet/fiber_id"][...]
+    with h5py.File(root / "fibers" / "fibers.h5", "r") as h:
+        off, radii = h["fibers/offsets"][...], h["fibers/radii"][...]
+    r = np.concatenate([radii[off[k]:off[k + 1], :2].max(axis=1) for k in ids])
+    return float(np.max(x[:, 2] + r))
+
+
+def test_velocity_mode_stops_at_target_thickness(sheet: Path, fiberform_cmd: list[str],
+                                                  build_dir: Path) -> None:
+    top, fab = _sheet_top(sheet), _fabric_top(sheet)
+    target = 0.5 * (top - fab)  # half-way between the fabric top and the sheet's highest fiber
+    assert target > 2e-6, (top, fab)
+    proc = _press(sheet, fiberform_cmd, build_dir,
+                  f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {target!r}, "
+                  "hold_time_s: 5.0e-4, output_interval_s: 1.0e-4}", "velocity")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    out = sheet / "runs" / NAME / "press"
+    with h5py.File(out / "press.h5", "r") as h:
+        c = h["curve"]
+        z, phase, t = c["plate_z"][...], c["phase"][...].astype(str), c["time"][...]
+        assert c["plate_z"].attrs["units"] == "m"
+        assert h["run"].attrs["fabric_top_z_m"] == pytest.approx(fab, abs=1e-12)
+        # the plate starts plate_start_gap_m (default 5 um) above the sheet's highest fiber
+        assert z[0] == pytest.approx(top + 5e-6, abs=1e-12)
+        hold = phase == "hold"
+        assert hold.sum() >= 5, phase
+        # plate positions from the fix's own displacement output: stopped at the target
+        assert np.all(np.abs(z[hold] - (fab + target)) < 1e-10), z[hold] - (fab + target)
+        moving = phase == "moving"
+        assert abs(z[moving][-1] - (fab + target)) < 1e-10, z[moving][-1] - (fab + target)
+        speed = np.diff(z[moving]) / np.diff(t[moving])
+        assert np.all(speed < 0) and np.all(-speed <= 0.01 * (1 + 1e-9)), speed
+        assert np.all(np.isfinite(c["thickness_span"][...]))
+        assert h["profiles/solid_fraction"].shape[0] == len(z)
+        # provenance on the root: scene, seed, code version, upstream hashes
+        for key in ("scene_json", "seed", "git_revision", "input_hashes"):
+            assert key in h.attrs, key
+        assert "laydown_restart" in h.attrs["input_hashes"]
+    for name in ("press.png", "curve.png", "sheet.vtu", "report.md", "sheet.restart"):
+        assert (out / name).stat().st_size > 0, name
+    assert "plate stopped at" in (out / "report.md").read_text()
+
+
+def test_pressure_mode_follows_its_schedule(sheet: Path, fiberform_cmd: list[str],
+                                            build_dir: Path) -> None:
+    p, rate, hold, release = 20.0, 4.0e4, 4.0e-4, 3.0e-4
+    proc = _press(sheet, fiberform_cmd, build_dir,
+                  f"{{mode: pressure, target_pressure_Pa: {p}, pressure_rate_Pa_s: {rate}, "
+                  f"hold_time_s: {hold}, release_time_s: {release}, plate_speed_m_s: 0.02, "
+                  "output_interval_s: 1.0e-4}", "pressure")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    fab = _fabric_top(sheet)
+    with h5py.File(sheet / "runs" / NAME / "press" / "press.h5", "r") as h:
+        c = h["curve"]
+        tc, target = c["time_since_contact"][...], c["target_pressure"][...]
+        z, yarn_f = c["plate_z"][...], c["yarn_force"][...]
+        assert c["yarn_force"].attrs["units"] == "N"
+    # the plate never passes the fabric top (keyword stop of fix wall/fiber/dlvo)
+    assert np.all(z >= fab - 1e-12), (z.min(), fab)
+    # the servo's target: ramp at `rate` to p, hold, unload at `rate`, zero in the release; the
+    # clock starts at the first contact (time since contact < 0 before it: target 0)
+    ramp = p / rate
+    want = np.interp(tc, [0.0, ramp, ramp + hold, 2 * ramp + hold], [0.0, p, p, 0.0])
+    want[tc < 0] = 0.0
+    assert np.any(tc > 0), tc
+    assert np.allclose(target, want, rtol=1e-9, atol=1e-9 * p), np.c_[tc, target, want]
+    # the yarns (and side planes) carry the fibers: their force on the fibers points up
+    assert np.all(np.isfinite(yarn_f))
+
+
+def test_overlap_guard_stops_overpressing(sheet: Path, fiberform_cmd: list[str],
+                                          build_dir: Path) -> None:
+    """The plate driven at 1 m/s to 1 um above the fabric top squeezes the fibers that lie on
+    the yarn knuckles (the sheet's top is ~20 um above the fabric top) far beyond what the
+    steric term can hold: the guard (5 % of the fiber thickness) ends the run."""
+    out = sheet / "runs" / NAME / "press"
+    shutil.rmtree(out, ignore_errors=True)
+    proc = _press(sheet, fiberform_cmd, build_dir,
+                  "{mode: velocity, plate_speed_m_s: 1.0, target_thickness_m: 1.0e-6, "
+                  "overlap_limit: 0.05, hold_time_s: 1.0e-4, output_interval_s: 2.0e-6, "
+                  "timestep_s: 1.0e-7}", "guard")
+    assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert "overlap guard" in proc.stderr, proc.stderr[-3000:]
+    assert "overlap_limit" in proc.stderr
+    # nothing of the press is left as a product (the stage writes atomically)
+    for name in ("press.h5", "press.png", "curve.png", "report.md", "sheet.restart"):
+        assert not (out / name).exists(), name
+
+
+@pytest.mark.parametrize("press, field", [
+    ("{mode: velocity, plate_speed_m_s: -1.0, target_thickness_m: 1.0e-6}", "plate_speed_m_s"),
+    ("{mode: velocity, target_thickness_m: 1.0e-3}", "target_thickness_m"),
+    ("{mode: pressure}", "target_pressure_Pa"),
+    ("{mode: velocity, target_thickness_m: 1.0e-5, target_pressure_Pa: 10.0}", "target_pressure_Pa"),
+    ("{mode: pressure, target_pressure_Pa: 10.0, overlap_limit: 0.0}", "overlap_limit"),
+])
+def test_bad_press_section_exits_2(sheet: Path, fiberform_cmd: list[str], build_dir: Path,
+                                   press: str, field: str) -> None:
+    out = sheet / "runs" / NAME / "press"
+    before = sorted(p.name for p in out.iterdir()) if out.is_dir() else []
+    proc = _press(sheet, fiberform_cmd, build_dir, press, "bad")
+    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert field in proc.stderr, proc.stderr[-2000:]
+    after = sorted(p.name for p in out.iterdir()) if out.is_dir() else []
+    assert after == before
+
+
+def test_press_without_laydown_exits_2(tmp_path: Path, fiberform_cmd: list[str],
+                                       build_dir: Path) -> None:
+    (tmp_path / "s.yaml").write_text(BASE + "press: {mode: pressure, target_pressure_Pa: 10.0}\n")
+    proc = _cli(fiberform_cmd, ["press", "s.yaml", "--build-dir", str(build_dir)], tmp_path)
+    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert re.search(r"laydown", proc.stderr), proc.stderr
+    assert not (tmp_path / "runs" / NAME / "press").exists()
+
+
+def test_one_and_two_ranks_press_the_same_sheet(sheet: Path, fiberform_cmd: list[str],
+                                                build_dir: Path) -> None:
+    top, fab = _sheet_top(sheet), _fabric_top(sheet)
+    target = 0.5 * (top - fab)
+    xs = []
+    for ranks in (1, 2):
+        proc = _press(sheet, fiberform_cmd, build_dir,
+                      f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {target!r}, "
+                      f"hold_time_s: 3.0e-4, output_interval_s: 1.0e-4, ranks: {ranks}}}",
+                      f"ranks{ranks}")
+        assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+        with h5py.File(sheet / "runs" / NAME / "press" / "press.h5", "r") as h:
+            xs.append((h["sheet/x"][...], h["sheet/fiber_id"][...], h["curve/plate_force"][...]))
+    (x1, id1, f1), (x2, id2, f2) = xs
+    assert np.array_equal(id1, id2)
+    assert np.max(np.abs(x1 - x2)) < 1e-9, np.max(np.abs(x1 - x2))
+    scale = max(1e-12, float(np.max(np.abs(f1))))
+    assert np.max(np.abs(f1 - f2)) <= 1e-6 * scale, (np.max(np.abs(f1 - f2)), scale)
+    assert math.isfinite(scale)
