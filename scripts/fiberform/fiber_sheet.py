@@ -255,7 +255,10 @@ def write_sheet_vtu(path: Path, x: Array, fiber: Array, offsets: Array) -> None:
 
 
 def write_sheet_png(path: Path, x: Array, offsets: Array, pts: Array, offs: Array, rad: Array,
-               title: str, box: tuple[list[float], list[float]]) -> None:
+                    title: str, box: tuple[list[float], list[float]],
+                    plate_z: float | None = None) -> None:
+    """Side (x-z) and top (x-y) views of the sheet on the fabric (yarns in grey); ``plate_z``: a
+    press plate's height, drawn dashed in the side view."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -279,8 +282,13 @@ def write_sheet_png(path: Path, x: Array, offsets: Array, pts: Array, offs: Arra
     if len(x):
         zlo = min(float(pts[:, 2].min()), float(x[:, 2].min()))
         zhi = max(float(pts[:, 2].max()), float(x[:, 2].max()))
+        if plate_z is not None:
+            zhi = max(zhi, plate_z)
         pad = 0.1 * (zhi - zlo + 1e-4)
         ax1.set_ylim((zlo - pad) * 1e3, (zhi + pad) * 1e3)
+    if plate_z is not None:
+        ax1.axhline(plate_z * 1e3, color="k", ls="--", lw=1, label="plate")
+        ax1.legend(loc="upper right")
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png")

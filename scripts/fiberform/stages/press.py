@@ -464,7 +464,7 @@ class Press(Stage):
         write_sheet_vtu(tmp[VTU_NAME], x_last, fid_last, off_last)
         write_sheet_png(tmp[PNG_NAME], x_last, off_last, pts, offs, rad,
                         f"{scene.name}: pressed sheet ({pr.mode} mode), plate at "
-                        f"{plate_z[-1] * 1e3:.4f} mm", (dom.lo_m, dom.hi_m))
+                        f"{plate_z[-1] * 1e3:.4f} mm", (dom.lo_m, dom.hi_m), plate_z=float(plate_z[-1]))
         _write_curve(tmp[CURVE_NAME], thick_plate, np.array(span), pressure, phase,
                      f"{scene.name}: pressure vs thickness ({pr.mode} mode)")
         summary = _summary(pr, t, pressure, thick_plate, np.array(span), np.array(phi_thick),
@@ -547,16 +547,18 @@ def _write_curve(path: Path, thick_plate: Array, span: Array, pressure: Array, p
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
     ph = np.array(phase)
+    big = bool(np.nanmax(np.abs(pressure), initial=0.0) >= 1e3)
+    scale, unit = (1e-3, "kPa") if big else (1.0, "Pa")
     for name, color in (("approach", "0.6"), ("moving", "C0"), ("loading", "C0"), ("hold", "C2"),
                         ("unloading", "C3"), ("release", "C1")):
         sel = ph == name
         if not np.any(sel):
             continue
-        ax1.plot(thick_plate[sel] * 1e6, pressure[sel] * 1e-3, ".", color=color, label=name)
-        ax2.plot(span[sel] * 1e6, pressure[sel] * 1e-3, ".", color=color, label=name)
-    ax1.set(xlabel="plate-to-fabric thickness (um)", ylabel="pressure (kPa)",
+        ax1.plot(thick_plate[sel] * 1e6, pressure[sel] * scale, ".", color=color, label=name)
+        ax2.plot(span[sel] * 1e6, pressure[sel] * scale, ".", color=color, label=name)
+    ax1.set(xlabel="plate-to-fabric thickness (um)", ylabel=f"pressure ({unit})",
             title="plate thickness (while in contact)")
-    ax2.set(xlabel="span thickness (um)", ylabel="pressure (kPa)",
+    ax2.set(xlabel="span thickness (um)", ylabel=f"pressure ({unit})",
             title="5-95 % node span + fiber width")
     ax1.legend()
     fig.suptitle(title)
