@@ -220,3 +220,42 @@ def test_one_and_two_ranks_press_the_same_sheet(sheet: Path, fiberform_cmd: list
     scale = max(1e-12, float(np.max(np.abs(f1))))
     assert np.max(np.abs(f1 - f2)) <= 1e-6 * scale, (np.max(np.abs(f1 - f2)), scale)
     assert math.isfinite(scale)
+
+
+def test_permeability_after_the_press_reads_the_pressed_sheet(sheet: Path, fiberform_cmd: list[str],
+                                                               build_dir: Path) -> None:
+    """With press and permeability sections, stage permeability-press puts the PRESSED sheet
+    (press.h5 /sheet) on the fabric, in its own folder (the OpenFOAM run itself is tested in
+    tests/test_permeability.py; here the geometry it is given)."""
+    import os
+
+    from fiberform.scene import load_scene
+    from fiberform.stages import STAGES
+    from fiberform.stages._stage import StageContext
+
+    top, fab = _sheet_top(sheet), _fabric_top(sheet)
+    press = (f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {0.5 * (top - fab)!r}, "
+             "hold_time_s: 3.0e-4, output_interval_s: 1.0e-4}")
+    proc = _press(sheet, fiberform_cmd, build_dir, press, "perm")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    path = sheet / "perm2.yaml"
+    path.write_text(BASE + f"press: {press}\npermeability: {{mode: subgrid}}\n")
+    cwd = os.getcwd()
+    try:
+        os.chdir(sheet)
+        scene = load_scene(path)
+        ctx = StageContext(scene=scene, scene_path=path, build_dir=build_dir)
+        stage = STAGES["permeability-press"]
+        assert stage.stage_dir(ctx).name == "permeability-press"
+        assert STAGES["permeability"].stage_dir(ctx).name == "permeability-laydown"
+        geo = stage.geometry(ctx)
+        plain = STAGES["permeability"].geometry(ctx)
+    finally:
+        os.chdir(cwd)
+    with h5py.File(sheet / "runs" / NAME / "press" / "press.h5", "r") as h:
+        x, offs = h["sheet/x"][...], h["sheet/offsets"][...]
+    got = np.concatenate([c.points for c in geo.fiber_chains])
+    assert len(geo.fiber_chains) == len(offs) - 1
+    assert np.array_equal(got, x)
+    with h5py.File(sheet / "runs" / NAME / "laydown" / "laydown.h5", "r") as h:
+        assert np.array_equal(np.concatenate([c.points for c in plain.fiber_chains]), h["sheet/x"][...])

@@ -11,7 +11,7 @@ from ._stage import Outcome, Stage, StageContext
 from .fabric import FabricStage
 from .flow import FlowStage
 from .particles import DemoParticles
-from .permeability import PermeabilityStage
+from .permeability import PermeabilityPressStage, PermeabilityStage
 from .generate import Generate
 from .laydown import Laydown
 from .press import Press
@@ -20,7 +20,8 @@ __all__ = ["STAGES", "Outcome", "Stage", "StageContext", "stage"]
 
 #: Every stage by CLI name, in pipeline order.
 STAGES: dict[str, Stage] = {s.name: s for s in (DemoParticles(), Generate(), FabricStage(), FlowStage(),
-                                               Laydown(), Press(), PermeabilityStage())}
+                                               Laydown(), Press(), PermeabilityStage(),
+                                               PermeabilityPressStage())}
 
 
 def stage(name: str) -> Stage:

@@ -51,7 +51,7 @@ from ..porous_media import (
     line_fraction, subgrid_resistance,
 )  # fmt: skip
 from ..products import (
-    FABRIC_H5, FIBERS_H5, LAYDOWN_H5, Chain, read_fabric_image, read_sheet_chains,
+    FABRIC_H5, FIBERS_H5, LAYDOWN_H5, PRESS_H5, Chain, read_fabric_image, read_sheet_chains,
     read_yarn_chains,
 )  # fmt: skip
 from ..provenance import file_hash, write_dataset
@@ -167,6 +167,9 @@ class PermeabilityStage(Stage):
     products = (H5_NAME, REPORT_NAME, PNG_NAME)
     code_version = 1
 
+    #: the sheet this stage puts on the fabric (a product with /sheet/x, fiber_id, offsets)
+    sheet_product = LAYDOWN_H5
+
     def stage_dir(self, ctx: StageContext) -> Path:
         kind = "laydown" if ctx.scene.laydown is not None else "fabric"
         return ctx.scene.output_path / f"{self.folder}-{kind}"
@@ -204,7 +207,7 @@ class PermeabilityStage(Stage):
         root = ctx.scene.output_path
         paths = {"fabric_h5": root / FABRIC_H5}
         if ctx.scene.laydown is not None:
-            paths["laydown_h5"] = root / LAYDOWN_H5
+            paths["sheet_h5"] = root / self.sheet_product
             paths["fibers_h5"] = root / FIBERS_H5
         return paths
 
@@ -227,14 +230,14 @@ class PermeabilityStage(Stage):
         paths = self._upstream(ctx)
         img = read_fabric_image(paths["fabric_h5"])
         yarns = read_yarn_chains(paths["fabric_h5"])
-        fibers = read_sheet_chains(paths["laydown_h5"], paths["fibers_h5"]) if "laydown_h5" in paths else []
+        fibers = read_sheet_chains(paths["sheet_h5"], paths["fibers_h5"]) if "sheet_h5" in paths else []
         up = img.upper
         top = float(up[2])
         for c in fibers:
             top = max(top, float(np.max(c.points[:, 2])) + c.radius)
         if fibers:
             thinnest = 2.0 * min(c.radius for c in fibers)
-        elif "laydown_h5" in paths and ctx.scene.fibers is not None:
+        elif "sheet_h5" in paths and ctx.scene.fibers is not None:
             thinnest = ctx.scene.fibers.width_m  # an empty sheet: the mesh of the sheets
         elif yarns:
             thinnest = 2.0 * min(c.radius for c in yarns)
@@ -285,6 +288,20 @@ class PermeabilityStage(Stage):
             print(f"permeability: warning: the outflow varied by {conv.relative_amplitude:.2g} of "
                   f"its mean over the last {conv.window} iterations (tolerance "
                   f"{perm.convergence_tolerance:g}); see {self.stage_dir(ctx) / REPORT_NAME}")
+
+
+class PermeabilityPressStage(PermeabilityStage):
+    """The same air flow through the fabric and the PRESSED sheet (press.h5 /sheet), products in
+    ``<output_dir>/permeability-press/``, apart from the unpressed sheet's (issue 12)."""
+
+    name = "permeability-press"
+    summary = "air permeability of the fabric and the pressed sheet at 125 Pa, in CFM (OpenFOAM)"
+    requires = ("fabric", "laydown", "press", "permeability")
+    uses = ("fabric", "fibers", "laydown", "press", "permeability")
+    sheet_product = PRESS_H5
+
+    def stage_dir(self, ctx: StageContext) -> Path:
+        return ctx.scene.output_path / f"{self.folder}-press"
 
 
 def write_permeability_h5(
