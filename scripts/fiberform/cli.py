@@ -165,6 +165,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if o.message not in ("done", "up to date"):
             status += f" ({o.message})"
         lines.append(f"| {o.stage} | {status} | {o.elapsed_s:.2f} | {products} |")
+    results = [line for st in stages for line in st.results(ctx)]
+    if results:
+        lines += ["", "## Results", "", *(f"- {line}" for line in results)]
     lines += ["", "Each stage folder holds its own `report.md` (where the stage writes one) and the logs "
               "of the programs it ran (`log.<tool>`)."]
     report = root / "report.md"

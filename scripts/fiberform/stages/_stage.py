@@ -89,6 +89,11 @@ class Stage(abc.ABC):
         d = self.stage_dir(ctx)
         return tuple(d / p for p in self.products)
 
+    def results(self, ctx: StageContext) -> list[str]:
+        """Key results of a finished stage, one line each, read back from its HDF5 product (the
+        run report's "Results"); none by default."""
+        return []
+
     # -- checks and hashes ---------------------------------------------------------------------
 
     def check_scene(self, scene: Scene) -> list[str]:

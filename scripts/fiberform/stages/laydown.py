@@ -190,6 +190,13 @@ class Laydown(Stage):
     products = (H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME, SHEET_RESTART)
     code_version = 2
 
+    def results(self, ctx: StageContext) -> list[str]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            a = h5["run"].attrs
+            return [f"lay-down: {'settled' if a['settled'] else 'NOT settled'} after "
+                    f"{a['simulated_time_s'] * 1e3:.2f} ms; sheet thickness {a['sheet_thickness_m'] * 1e6:.1f} um "
+                    f"(5-95 % node span + width), grammage {a['grammage_kg_m2'] * 1e3:.3g} g/m^2"]
+
     def execute(self, ctx: StageContext) -> Outcome:
         out = super().execute(ctx)
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:

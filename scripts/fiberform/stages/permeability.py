@@ -174,6 +174,16 @@ class PermeabilityStage(Stage):
         kind = "laydown" if ctx.scene.laydown is not None else "fabric"
         return ctx.scene.output_path / f"{self.folder}-{kind}"
 
+    def results(self, ctx: StageContext) -> list[str]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            r = h5["result"]
+            what = self.stage_dir(ctx).name.removeprefix("permeability-")
+            sheet = {"fabric": "bare fabric", "laydown": "fabric + laid-down sheet",
+                     "press": "fabric + pressed sheet"}.get(what, what)
+            return [f"air permeability ({sheet}) at {float(r['pressure_drop'][()]):g} Pa: "
+                    f"{float(r['cfm'][()]):.4g} +- {float(r['cfm_uncertainty'][()]):.2g} CFM "
+                    f"({'converged' if r.attrs['converged'] else 'NOT converged'})"]
+
     def check_scene(self, scene: Scene) -> list[str]:
         problems = super().check_scene(scene)
         if problems:

@@ -264,6 +264,19 @@ class Press(Stage):
     products = (H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME, REPORT_NAME, RESTART_NAME)
     code_version = 1
 
+    def results(self, ctx: StageContext) -> list[str]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            c, a = h5["curve"], h5["run"].attrs
+            span = c["thickness_span"][...]
+            p = c["pressure"][...]
+            line = (f"press ({a['mode']}): plate at {(c['plate_z'][-1] - a['fabric_top_z_m']) * 1e6:.1f} um "
+                    f"above the fabric top, largest pressure {np.nanmax(p):.3g} Pa; span thickness "
+                    f"{span[0] * 1e6:.1f} -> {span[-1] * 1e6:.1f} um")
+            if "hold_pressure_mean_Pa" in a:
+                line += (f"; hold {a['hold_pressure_mean_Pa']:.4g} Pa (largest deviation "
+                         f"{a['hold_pressure_max_dev'] * 100:.2f} %)")
+            return [line]
+
     def _upstream(self, ctx: StageContext) -> dict[str, Path]:
         root = ctx.scene.output_path
         return {"laydown_h5": root / LAYDOWN_H5, "laydown_restart": root / LAYDOWN_RESTART,
