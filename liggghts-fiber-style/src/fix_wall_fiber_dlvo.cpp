@@ -183,8 +183,9 @@ void FixWallFiberDlvo::after_pass() {
   target_ = 0.0;
   if (contact_step_ >= 0) {
     target_ = schedule_.at((update->ntimestep - contact_step_) * update->dt);
+    const double m = adapt_.update(target_ - pressure_);
     u = newton_ ? fiberform::physics::press::servo_speed_bounded(target_, pressure_, p_ref_, u_max_, k_bound_,
-                                                                update->dt, kServoSteps)
+                                                                update->dt, kServoSteps, m)
                 : fiberform::physics::press::servo_speed(target_, pressure_, p_ref_, u_max_);
   }
   if (at_stop_ && u > 0.0) u = 0.0;  // resting on its stop: only a retreat moves it

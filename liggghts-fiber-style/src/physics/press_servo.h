@@ -55,11 +55,31 @@ inline double servo_speed(double p_target, double p, double p_ref, double u_max)
 // for n >= 1 whatever the contact stiffness (without the bound, u_max K dt / p_ref > 1 gives a limit
 // cycle: measured 0 <-> 15 Pa around a 4 Pa target on one fiber, docs/models/press.md).
 inline double servo_speed_bounded(double p_target, double p, double p_ref, double u_max, double K_bound,
-                                  double dt, double n) {
+                                  double dt, double n, double m = 1.0) {
   double g = u_max / p_ref;
-  if (K_bound > 0.0) g = std::min(g, 1.0 / (n * K_bound * dt));
+  if (K_bound > 0.0) g = std::min(g, m / (n * K_bound * dt));
   return std::clamp(g * (p_target - p), -u_max, u_max);
 }
+
+// The bound above uses the plate contacts' own stiffness, an UPPER bound of the sheet's: a soft
+// sheet (fibers bending between crossings; measured on a log-cabin stack: 7000 x softer) would be
+// approached with a time constant of thousands of steps. GainAdapt multiplies the bounded gain by
+// m >= 1: m grows by `grow` per step while the pressure error keeps its sign and halves when the
+// error changes sign (an overshoot), so the loop finds the sheet's own stiffness in a few tens of
+// steps and backs off as soon as it rings. (Unit-tested on a soft linear sheet and on a stiff one.)
+struct GainAdapt {
+  double m = 1.0, prev_err = 0.0;
+  double grow = 1.1, m_max = 1e6;
+
+  double update(double err) {
+    if (prev_err * err < 0.0)
+      m = std::max(1.0, 0.5 * m);
+    else if (err != 0.0)
+      m = std::min(m_max, grow * m);
+    prev_err = err;
+    return m;
+  }
+};
 
 // A peak-hold estimate of a stiffness bound that forgets at rate `decay` per step (0 < decay <= 1):
 // max(now, decay * previous). Contacts that open for a step do not reset the bound at once.
