@@ -184,11 +184,14 @@ def test_log_cabin_deflection_matches_continuous_beam(runs: dict[str, dict[str, 
     r = runs["steric"]
     assert F_MAX > 3 * P_LOAD and C_BEND > 100 * C_CONTACT
     k = _at(r, int(r["hold_end"][0]))
-    P = -r["fz"][k] / N_CROSS
+    # the last 100 steps of the hold (20 outputs): the plate force of single steps flickers with
+    # the contacts' states, so force and deflection are averaged over them
+    hold = slice(k - 19, k + 1)
+    P = -float(np.mean(r["fz"][hold])) / N_CROSS
+    delta = float(np.mean(r["delta"][hold]))
     assert 0.3 * P_LOAD < P < F_MAX / 3, (P, P_LOAD, F_MAX)  # a load the law carries
-    # statics: the floor carries the plate force less the clamps' share (the end crossings)
     expected = P * C_BEND
     layers = (r["top"][0] - r["top"][k]) / 3
-    assert abs(r["delta"][k] / expected - 1) < 0.05, (
-        f"deflection {r['delta'][k]:.4e} m vs P s^3/(192 E I) = {expected:.4e} m (P = {P:.3e} N); "
+    assert abs(delta / expected - 1) < 0.05, (
+        f"deflection {delta:.4e} m vs P s^3/(192 E I) = {expected:.4e} m (P = {P:.3e} N); "
         f"compression per layer from the stack top {layers:.3e} m")
