@@ -78,8 +78,7 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
   }
   fiberform::validate_contact_config(lmp, style, cfg);
   own_engine_->cfg = cfg;
-  if (area_ > 0 && plane0_.velocity.x * plane0_.velocity.x + plane0_.velocity.y * plane0_.velocity.y +
-                           plane0_.velocity.z * plane0_.velocity.z > 0)
+  if (area_ > 0 && fiberform::physics::dot(plane0_.velocity, plane0_.velocity) > 0)
     error->all(FLERR, "fix wall/fiber/dlvo: servo and velocity exclude each other (the servo sets the speed)");
   plane_ = plane0_;
   size_vector = 16;
@@ -120,7 +119,7 @@ void FixWallFiberDlvo::post_force(int vflag) {
   force_sum_[0] = t.x;
   force_sum_[1] = t.y;
   force_sum_[2] = t.z;
-  MPI_Allreduce(&gap, &newton_min_gap_, 1, MPI_DOUBLE, MPI_MIN, world);
+  newton_gap_local_ = gap;  // reduced over ranks when output (compute_vector)
   after_pass();
   move_plane();
   bodies_.set_plane_point(0, plane_.point);
@@ -128,9 +127,9 @@ void FixWallFiberDlvo::post_force(int vflag) {
 }
 
 void FixWallFiberDlvo::setup(int vflag) {
-  if (!step0_set_) {
-    step0_ = moved_ = update->ntimestep;
-    step0_set_ = true;
+  if (!moved_set_) {  // the plane starts moving at the fix's first run
+    moved_ = update->ntimestep;
+    moved_set_ = true;
   }
   FiberContactFix::setup(vflag);
 }
@@ -171,9 +170,10 @@ void FixWallFiberDlvo::move_plane() {
 /* After each pass: the total contact force on the fibers (all ranks), the plate pressure, and the
    servo's plate speed for the next step. */
 void FixWallFiberDlvo::after_pass() {
-  MPI_Allreduce(force_sum_, force_, 3, MPI_DOUBLE, MPI_SUM, world);
+  force_reduced_ = false;
+  if (area_ <= 0) return;  // no servo: the force is reduced only when output (compute_vector)
+  reduce_force();
   const double n[3] = {plane_.normal.x, plane_.normal.y, plane_.normal.z};
-  if (area_ <= 0) return;
   pressure_ = fiberform::physics::press::plate_pressure(force_, n, area_);
   // the schedule's clock starts at the first contact (any force); before it the plate approaches
   // at the speed limit
@@ -183,13 +183,20 @@ void FixWallFiberDlvo::after_pass() {
   target_ = 0.0;
   if (contact_step_ >= 0) {
     target_ = schedule_.at((update->ntimestep - contact_step_) * update->dt);
+    // k_bound_ stays 0 without implicit_force newton: then this is the plain proportional law
     const double m = adapt_.update(target_ - pressure_);
-    u = newton_ ? fiberform::physics::press::servo_speed_bounded(target_, pressure_, p_ref_, u_max_, k_bound_,
-                                                                update->dt, kServoSteps, m)
-                : fiberform::physics::press::servo_speed(target_, pressure_, p_ref_, u_max_);
+    u = fiberform::physics::press::servo_speed_bounded(target_, pressure_, p_ref_, u_max_, k_bound_, update->dt,
+                                                       kServoSteps, m);
   }
   if (at_stop_ && u > 0.0) u = 0.0;  // resting on its stop: only a retreat moves it
   plane_.velocity = u * plane_.normal;
+}
+
+/* The contact force on the fibers summed over the ranks (collective; once per pass). */
+void FixWallFiberDlvo::reduce_force() {
+  if (force_reduced_) return;
+  MPI_Allreduce(force_sum_, force_, 3, MPI_DOUBLE, MPI_SUM, world);
+  force_reduced_ = true;
 }
 
 /* 1-5 engine counters, 6 smallest separation (m), 7-9 contact force on the fibers (N), 10 plate
@@ -198,8 +205,13 @@ void FixWallFiberDlvo::after_pass() {
    since the first contact (s; -1 before it); 15: 1 while the plate rests at its stop (keyword
    stop), else 0; 16: the servo's stiffness bound (Pa/m; implicit_force newton, else 0). */
 double FixWallFiberDlvo::compute_vector(int n) {
-  if (n == 5 && newton_) return std::isfinite(newton_min_gap_) ? newton_min_gap_ : 1.0;
+  if (n == 5 && newton_) {
+    double gap = 0.0;
+    MPI_Allreduce(&newton_gap_local_, &gap, 1, MPI_DOUBLE, MPI_MIN, world);
+    return std::isfinite(gap) ? gap : 1.0;
+  }
   if (n <= 5) return FiberContactFix::compute_vector(n);
+  if (n <= 8) reduce_force();
   const fiberform::Vec3 d = plane_.point - plane0_.point;
   switch (n) {
     case 6: case 7: case 8: return force_[n - 6];

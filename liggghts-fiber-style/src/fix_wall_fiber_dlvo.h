@@ -10,6 +10,7 @@
 #ifndef LMP_FIX_WALL_FIBER_DLVO_H
 #define LMP_FIX_WALL_FIBER_DLVO_H
 
+#include <limits>
 #include <memory>
 
 #include "fiber_contact_fix.h"
@@ -36,17 +37,20 @@ class FixWallFiberDlvo : public FiberContactFix {
 
  private:
   fiberform::ContactEngine *own_engine_;
-  fiberform::Plane plane0_{};  // plane at the time step time0_
-  fiberform::Plane plane_{};   // plane now (moved in accumulate, once per time step)
-  bigint step0_ = 0, moved_ = 0;
-  bool step0_set_ = false;
+  fiberform::Plane plane0_{};  // plane at the fix's first run
+  fiberform::Plane plane_{};   // plane now (moved once per time step, move_plane)
+  bigint moved_ = 0;           // the step plane_ was last moved to
+  bool moved_set_ = false;
   // pressure servo (off when area_ == 0): area (m^2), speed limit (m/s), pressure band (Pa)
   double area_ = 0.0, u_max_ = 0.0, p_ref_ = 0.0;
   fiberform::physics::press::Schedule schedule_;
   double force_[3] = {0.0, 0.0, 0.0};  // contact force on the fibers, all ranks (N)
+  bool force_reduced_ = false;         // force_ holds the sum of this pass's force_sum_
+  void reduce_force();
   double pressure_ = 0.0, target_ = 0.0;
   bigint contact_step_ = -1;  // step of the first contact (servo clock), -1: none yet
-  double newton_min_gap_ = 1.0;  // implicit_force newton: smallest plate gap at the last step (m)
+  // implicit_force newton: this rank's smallest plate gap at the last step (m)
+  double newton_gap_local_ = std::numeric_limits<double>::infinity();
   double travel_max_ = -1.0;     // keyword stop: largest travel along the normal (m); < 0: none
   bool at_stop_ = false;
   // implicit_force newton: the servo's gain bound (physics/press_servo.h): the plate contacts'

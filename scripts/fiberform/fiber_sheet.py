@@ -12,12 +12,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 import numpy.typing as npt
 
 from .fabric_geometry import segment_distances
 from .inputs import STAR, LiggghtsInput, file_token, ident_list
+from .products import Yarns, read_yarns
 from .scene import Scene
 
 Array = npt.NDArray[np.float64]
@@ -114,18 +114,17 @@ def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str,
 
 
 
-def write_yarns(path: Path, fabric_h5: Path) -> tuple[Array, Array, Array]:
-    """The fabric's yarn centrelines as fix fiber/yarns reads them: ``yarn x y z radius``."""
-    with h5py.File(fabric_h5, "r") as h5:
-        pts = np.asarray(h5["yarns/points"][...], dtype=float)
-        offs = np.asarray(h5["yarns/offsets"][...], dtype=np.int64)
-        rad = np.asarray(h5["yarns/radius"][...], dtype=float)
+def write_yarns(path: Path, fabric_h5: Path) -> Yarns:
+    """The fabric's yarn centrelines as fix fiber/yarns reads them: ``yarn x y z radius``; returns
+    the yarns read (products.read_yarns)."""
+    yarns = read_yarns(fabric_h5)
+    pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
     with open(path, "w") as fh:
         fh.write("# yarn-index x y z radius (m), from fabric.h5 /yarns\n")
         for k in range(len(rad)):
             for p in pts[offs[k]:offs[k + 1]]:
                 fh.write(f"{k} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} {float(rad[k])!r}\n")
-    return pts, offs, rad
+    return yarns
 
 
 def yarn_distances(x: Array, pts: Array, offs: Array, rad: Array) -> Array:

@@ -269,7 +269,8 @@ class Laydown(Stage):
             atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
         else:
             prepare_resume(work, resume_step)
-        pts, offs, rad = write_yarns(work / YARNS_NAME, paths["fabric_h5"])
+        yarns = write_yarns(work / YARNS_NAME, paths["fabric_h5"])
+        pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
         with h5py.File(paths["fibers_h5"], "r") as fh:
             f_off = np.asarray(fh["fibers/offsets"][...], dtype=np.int64)
             f_mass = np.asarray(fh["fibers/mass"][...], dtype=float)
@@ -320,7 +321,7 @@ class Laydown(Stage):
         counts = np.array([int(np.sum(fid_s == k)) for k in present], dtype=np.int64)
         offsets = np.concatenate([[0], np.cumsum(counts)])
         gaps = yarn_distances(xs, pts, offs, rad) if len(xs) else np.zeros(0)
-        fabric_top = float(np.max(pts[:, 2] + np.repeat(rad, np.diff(offs))))
+        fabric_top = yarns.top
         thickness = sheet_thickness(xs[:, 2], f.width_m) if len(xs) else 0.0
         area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
 

@@ -45,8 +45,8 @@ from ..fiber_sheet import (
 from ..inputs import LiggghtsInput, dump_format, file_token, fix_ref, ident_list, jump_if_at_least
 from ..liggghts_log import read_dump, thermo_rows
 from ..products import (
-    FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, read_fiber_outer_axes, read_sheet,
-    read_yarns,
+    FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
+    read_sheet, read_yarns,
 )
 from ..provenance import file_hash, write_dataset
 from ..runner import liggghts_progress, run
@@ -88,8 +88,6 @@ class PressPlan:
         self.guard = pr.overlap_limit * t_min
         self.guard_fiber = self.start_overlap_fiber + self.guard
         self.guard_yarn = self.start_overlap_yarn + self.guard
-        # the plate never passes the fabric top (it would rest on the yarn knuckles)
-        self.stop = self.z0 - fabric_top
         if pr.mode == "velocity":
             assert pr.target_thickness_m is not None
             travel = self.z0 - (fabric_top + pr.target_thickness_m)
@@ -178,6 +176,7 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     cx, cy = p.centre
 
     def plate(z: float, *motion: object) -> None:
+        # stop: the plate never passes the fabric top (it would rest on the yarn knuckles)
         s.command("fix", "plate", "all", "wall/fiber/dlvo", "plane", cx, cy, z, 0.0, 0.0, -1.0,
                   *motion, "stop", max(0.0, z - p.fabric_top), *plate_words)
 
@@ -330,7 +329,7 @@ class Press(Stage):
         # the fibers left on the sheet (the lay-down may have removed some)
         write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
                            read_sheet(up["laydown_h5"]).fiber_id.tolist())
-        pts, offs, rad = write_yarns(work / YARNS_NAME, up["fabric_h5"])
+        yarns = write_yarns(work / YARNS_NAME, up["fabric_h5"])
         (work / INPUT_NAME).write_text(build_input(scene, p))
         t0 = time.monotonic()
         run([str((ctx.build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log", "none"],
@@ -355,14 +354,14 @@ class Press(Stage):
                 f"carry this load (lower target_pressure_Pa or plate_speed_m_s, raise "
                 f"target_thickness_m, or a smaller timestep_s; docs/stages/press.md, limits); "
                 f"snapshots up to there: {work / TRAJ_NAME}")
-        self._collect(ctx, h5, tmp, p, work, (pts, offs, rad), wall)
+        self._collect(ctx, h5, tmp, p, work, yarns, wall)
 
     def _collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], p: PressPlan,
-                 work: Path, yarns: tuple[Array, Array, Array], wall: float) -> None:
+                 work: Path, yarns: Yarns, wall: float) -> None:
         scene = ctx.scene
         pr, dom, f = scene.press, scene.domain, scene.fibers
         assert pr is not None and dom is not None and f is not None
-        pts, offs, rad = yarns
+        pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
         rows = np.array(thermo_rows((work / LOG_NAME).read_text(errors="replace")), dtype=float)
         if rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
             raise StageError(f"{work / LOG_NAME}: no thermo table of {len(COLUMNS)} columns")
@@ -394,6 +393,7 @@ class Press(Stage):
         nbins = max(8, int(math.ceil((z_hi - z_lo) / (0.25 * p.t_min))))
         edges = np.linspace(z_lo, z_hi, nbins + 1)
         x_last = fid_last = off_last = None
+        radii: dict[bytes, Array] = {}  # node radii per set of fibers present (read once)
         for k, st in enumerate(step):
             fr = frames.get(int(st))
             if fr is None:
@@ -402,7 +402,10 @@ class Press(Stage):
                 profiles.append(np.full(nbins, np.nan))
                 continue
             x, present, offsets = frame_fibers(fr.columns)
-            r = np.max(read_fiber_outer_axes(ctx.scene.output_path / FIBERS_H5, present), axis=1)
+            key = present.tobytes()
+            if key not in radii:
+                radii[key] = np.max(read_fiber_outer_axes(ctx.scene.output_path / FIBERS_H5, present), axis=1)
+            r = radii[key]
             span.append(sheet_thickness(x[:, 2], f.width_m))
             phi = solid_fraction_profile(x, offsets, r, edges, p.area)
             profiles.append(phi)
