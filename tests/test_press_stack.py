@@ -110,9 +110,10 @@ def _stack() -> tuple[list[Fiber], list[int]]:
     return fibs, first2
 
 
-def _run(work: Path, build_dir: Path, terms: str) -> dict[str, np.ndarray]:
+def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict[str, np.ndarray]:
     """Plate from G0 above layer 3 down by TRAVEL at U_PLATE (fix wall/fiber/dlvo velocity +
-    stop), held there for HOLD_STEPS, then lifted by 2 TRAVEL at U_PLATE and left there."""
+    stop), held there for HOLD_STEPS, then lifted by 2 TRAVEL at U_PLATE and left there.
+    ``gravity``: Earth's gravity and buoyancy on the fibers (bench/press/run.py; the test: none)."""
     work.mkdir(parents=True, exist_ok=True)
     fibs, first2 = _stack()
     lx, ly = N2 * S, NSPAN * S
@@ -140,7 +141,7 @@ def _run(work: Path, build_dir: Path, terms: str) -> dict[str, np.ndarray]:
         "neigh_modify delay 0", f"group clamp id {clamp}",
         f"fix beam all fiber/beam nodes nodes.fib E {E!r} G {G!r} density {RHO!r} shear_factor {KSH!r} clamp clamp",
         # water at rest (drag damps the stack's spring-back; no gravity, see the docstring)
-        "fix drag all fiber/drag flow uniform 0 0 0 gravity 0 0 0",
+        "fix drag all fiber/drag flow uniform 0 0 0" + ("" if gravity else " gravity 0 0 0"),
         f"fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms {terms} implicit_force newton",
         plate(z_plate, -U_PLATE, TRAVEL + G0),
         f"pair_style fiber/dlvo terms {terms} implicit_force newton", "pair_coeff * *",
