@@ -8,6 +8,7 @@ options), 130 interrupted. Errors go to stderr as ``fiberform: error: ...``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -16,6 +17,7 @@ from pathlib import Path
 from . import __version__
 from ._versions import build_dir, component_versions
 from .errors import ConfigError, FiberformError, SceneError
+from .pipeline import StageGraph, applicable_stages
 from .provenance import atomic_write_text
 from .scene import SECTIONS, Scene, field_table, load_scene
 from .stages import STAGES, Stage, StageContext
@@ -29,8 +31,9 @@ def _cmd_version(args: argparse.Namespace) -> int:
     return 0
 
 
-def _applicable(scene: Scene) -> list[Stage]:
-    return [s for s in STAGES.values() if all(getattr(scene, r) is not None for r in s.requires)]
+def _graph(args: argparse.Namespace, scene: Scene) -> StageGraph:
+    ctx = _context(args, scene)
+    return StageGraph(applicable_stages(scene), ctx)
 
 
 def _summary(scene: Scene, source: str) -> list[str]:
@@ -60,7 +63,7 @@ def _summary(scene: Scene, source: str) -> list[str]:
         lines.append(
             f"  contact     {c.model}, integrator {c.integrator}, terms [{', '.join(c.terms)}]"
         )
-    stages = _applicable(scene)
+    stages = applicable_stages(scene)
     lines.append(f"  stages      {', '.join(s.name for s in stages) or '(none yet)'}")
     return lines
 
@@ -68,7 +71,7 @@ def _summary(scene: Scene, source: str) -> list[str]:
 def _cmd_check(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     problems: list[str] = []
-    for st in _applicable(scene):
+    for st in applicable_stages(scene):
         problems.extend(st.check_scene(scene))
     if problems:
         raise SceneError(str(args.scene), list(dict.fromkeys(problems)))
@@ -118,23 +121,54 @@ def _stage_runner(st: Stage) -> Callable[[argparse.Namespace], int]:
 
 
 def _context(args: argparse.Namespace, scene: Scene) -> StageContext:
+    force = getattr(args, "force", False) is True  # a stage command's flag; `run` forces per stage
+    oversubscribe = bool(getattr(args, "oversubscribe", False))
+    resume = bool(getattr(args, "resume", False))
     return StageContext(
         scene=scene,
         scene_path=Path(args.scene),
         build_dir=Path(args.build_dir),
-        force=args.force,
-        oversubscribe=args.oversubscribe,
-        options={"force": args.force, "oversubscribe": args.oversubscribe,
-                 "resume": args.resume},
+        force=force,
+        oversubscribe=oversubscribe,
+        options={"force": force, "oversubscribe": oversubscribe, "resume": resume},
     )
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    """Every stage the scene enables, in pipeline order, then a pipeline report."""
+def _cmd_status(args: argparse.Namespace) -> int:
+    """Each stage the scene enables: done / stale / missing / running / failed."""
     scene = load_scene(args.scene)
-    stages = _applicable(scene)
-    if not stages:
+    graph = _graph(args, scene)
+    if not graph.order:
         raise SceneError(str(args.scene), ["(scene): enables no stage; see docs/stages/scene-format.md"])
+    rows = graph.status()
+    width = max(len(r.stage) for r in rows)
+    print(f"scene '{scene.name}', output {scene.output_path}")
+    for r in rows:
+        needs = ", ".join(graph.upstream[r.stage]) or "-"
+        print(f"  {r.stage:<{width}}  {r.state:<7}  {r.detail}" + (f"  [needs: {needs}]" if args.verbose else ""))
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    """The stages the scene enables (or those between --from and --to), in the order of the stage
+    graph, then a pipeline report."""
+    scene = load_scene(args.scene)
+    graph = _graph(args, scene)
+    if not graph.order:
+        raise SceneError(str(args.scene), ["(scene): enables no stage; see docs/stages/scene-format.md"])
+    stages = graph.select(args.start, args.stop)
+    forced: set[str]
+    if args.force is None:
+        forced = set()
+    elif not args.force:  # --force alone: every selected stage
+        forced = {st.name for st in stages}
+    else:
+        graph.check_names(args.force, "--force")
+        outside = [n for n in args.force if n not in {st.name for st in stages}]
+        if outside:
+            raise ConfigError(f"--force {outside[0]!r}: not among the stages selected by --from/--to "
+                              f"({', '.join(st.name for st in stages)})")
+        forced = set(args.force)
     problems: list[str] = []
     for st in stages:  # check everything before anything is written
         problems.extend(st.check_scene(scene))
@@ -144,7 +178,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     outcomes = []
     for i, st in enumerate(stages, 1):
         print(f"[{i}/{len(stages)}] {st.name}: {st.summary}", flush=True)
-        outcome = st.execute(ctx)
+        outcome = st.execute(dataclasses.replace(ctx, force=st.name in forced,
+                                                 options={**ctx.options, "force": st.name in forced}))
         outcomes.append(outcome)
         state = "up to date" if outcome.skipped else f"done in {outcome.elapsed_s:.2f} s"
         if outcome.message not in ("done", "up to date"):
@@ -234,10 +269,28 @@ def build_parser() -> argparse.ArgumentParser:
         add_build(p)
 
     p = sub.add_parser(
-        "run", help="run every stage the scene enables, in pipeline order, and write report.md"
+        "run", help="run the stages the scene enables, in the order of the stage graph, and write report.md"
     )
-    add_stage_options(p)
+    p.add_argument("scene", metavar="SCENE", help="scene YAML file")
+    p.add_argument("--from", dest="start", metavar="STAGE",
+                   help="start at STAGE: run it and the stages downstream of it (upstream products must exist)")
+    p.add_argument("--to", dest="stop", metavar="STAGE", help="stop at STAGE: run it and the stages it needs")
+    p.add_argument("--force", nargs="*", metavar="STAGE",
+                   help="redo the named stages even if their products are up to date (no name: every "
+                   "selected stage); stages downstream of a redone one rerun when its products change")
+    p.add_argument("--oversubscribe", action="store_true",
+                   help="allow more MPI ranks than cores (slow: for testing only)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted stage from its last restart file (laydown)")
+    add_build(p)
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("status", help="show each stage of the scene as done / stale / missing / running / "
+                       "failed (reads files only)")
+    p.add_argument("scene", metavar="SCENE", help="scene YAML file")
+    p.add_argument("-v", "--verbose", action="store_true", help="also list each stage's upstream stages")
+    add_build(p)
+    p.set_defaults(func=_cmd_status)
 
     for st in STAGES.values():
         p = sub.add_parser(st.name, help=f"stage: {st.summary}")

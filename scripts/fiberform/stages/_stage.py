@@ -12,11 +12,21 @@ is the stage's HDF5 file, which is written last and marks completion. A run
 4. checks its environment (:meth:`Stage.preflight`: binaries present, ranks possible);
 5. removes stale products, lets the stage write ``<product>.in_progress`` files, and renames them
    (the HDF5 file last) when all succeeded; on failure the ``.in_progress`` files are deleted.
+
+While it runs, ``<stage folder>/stage-state.json`` says ``running`` (pid, host, start); a failed or
+interrupted run leaves it saying ``failed`` with the error; a successful run removes it. The HDF5
+file records the stage's wall time (``elapsed_s``). ``fiberform status`` reads both
+(:mod:`fiberform.pipeline`). A stage declares the upstream products it reads in :meth:`Stage.needs`;
+the pipeline order follows from those declarations.
 """
 
 from __future__ import annotations
 
 import abc
+import datetime as _dt
+import json
+import os
+import socket
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -27,6 +37,7 @@ import h5py
 
 from ..errors import SceneError
 from ..provenance import (
+    atomic_write_text,
     in_progress_path,
     read_provenance,
     text_hash,
@@ -34,7 +45,10 @@ from ..provenance import (
 )
 from ..scene import Scene, section_hash
 
-__all__ = ["Outcome", "Stage", "StageContext"]
+__all__ = ["STATE_NAME", "Outcome", "Stage", "StageContext"]
+
+#: Run-state file in a stage folder (running / failed); absent after a successful run.
+STATE_NAME = "stage-state.json"
 
 
 @dataclass
@@ -88,6 +102,15 @@ class Stage(abc.ABC):
     def product_paths(self, ctx: StageContext) -> tuple[Path, ...]:
         d = self.stage_dir(ctx)
         return tuple(d / p for p in self.products)
+
+    def needs(self, ctx: StageContext) -> dict[str, Path]:
+        """The upstream products this stage reads, by key (absolute paths under the scene's
+        output_dir; they may depend on the scene). The pipeline orders stages by these
+        declarations: a stage runs after the stages whose products it needs. None by default."""
+        return {}
+
+    def state_path(self, ctx: StageContext) -> Path:
+        return self.stage_dir(ctx) / STATE_NAME
 
     def results(self, ctx: StageContext) -> list[str]:
         """Key results of a finished stage, one line each, read back from its HDF5 product (the
@@ -151,6 +174,10 @@ class Stage(abc.ABC):
         paths = self.product_paths(ctx)
         stage_dir = self.stage_dir(ctx)
         stage_dir.mkdir(parents=True, exist_ok=True)
+        state = self.state_path(ctx)
+        started = _now()
+        atomic_write_text(state, json.dumps({"state": "running", "stage": self.name, "pid": os.getpid(),
+                                             "host": socket.gethostname(), "started_utc": started}) + "\n")
         for p in paths:
             p.unlink(missing_ok=True)
         tmp = {p.name: in_progress_path(p) for p in paths}
@@ -160,11 +187,20 @@ class Stage(abc.ABC):
             with h5py.File(tmp[paths[0].name], "w") as h5:
                 write_provenance(h5, self.name, ctx.scene, hashes, ctx.options)
                 self.produce(ctx, h5, tmp, hashes)
+                h5.attrs["elapsed_s"] = time.monotonic() - start
             for p in paths[1:]:
                 tmp[p.name].replace(p)
             tmp[paths[0].name].replace(paths[0])
-        except BaseException:
+        except BaseException as exc:
             for t in tmp.values():
                 t.unlink(missing_ok=True)
+            reason = "interrupted" if isinstance(exc, KeyboardInterrupt) else (str(exc) or type(exc).__name__)
+            atomic_write_text(state, json.dumps({"state": "failed", "stage": self.name, "started_utc": started,
+                                                 "failed_utc": _now(), "error": reason[:2000]}) + "\n")
             raise
+        state.unlink(missing_ok=True)
         return Outcome(self.name, False, paths, time.monotonic() - start, "done")
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")

@@ -294,12 +294,12 @@ class FlowStage(Stage):
                     )
         return problems
 
-    def _fabric_h5(self, ctx: StageContext) -> Path:
-        return ctx.scene.output_path / FABRIC_H5
+    def needs(self, ctx: StageContext) -> dict[str, Path]:
+        return {"fabric_h5": ctx.scene.output_path / FABRIC_H5}
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
-        fab = self._fabric_h5(ctx)
+        fab = self.needs(ctx)["fabric_h5"]
         hashes["fabric_h5"] = file_hash(fab) if fab.is_file() else "missing"
         hashes["case_template"] = template_hash()
         return hashes
@@ -307,7 +307,7 @@ class FlowStage(Stage):
     def produce(
         self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str]
     ) -> None:
-        fab_path = self._fabric_h5(ctx)
+        fab_path = self.needs(ctx)["fabric_h5"]
         if not fab_path.is_file():
             raise StageError(f"flow needs {fab_path}: run `fiberform fabric` first")
         flow = ctx.scene.flow

@@ -63,17 +63,6 @@ EARLIER_LOG, RESUME_STATE = "log.earlier", "resume.json"
 SHEET_RESTART, SETTLED_LABEL = "sheet.restart", "laydown_end"
 
 
-def _paths(ctx: StageContext) -> dict[str, Path]:
-    root = ctx.scene.output_path
-    return {
-        "fibers_h5": root / FIBERS_H5,
-        "fibers_data": root / FIBERS_DATA,
-        "fibers_nodes": root / FIBERS_NODES,
-        "fabric_h5": root / FABRIC_H5,
-        "flow_grid": root / FLOW_GRID,
-    }
-
-
 def removal_height(scene: Scene) -> float:
     ld, fab = scene.laydown, scene.fabric
     assert ld is not None and fab is not None
@@ -233,9 +222,19 @@ class Laydown(Stage):
             problems.append("laydown.max_time_s: more than 1e8 steps")
         return problems
 
+    def needs(self, ctx: StageContext) -> dict[str, Path]:
+        root = ctx.scene.output_path
+        return {
+            "fibers_h5": root / FIBERS_H5,
+            "fibers_data": root / FIBERS_DATA,
+            "fibers_nodes": root / FIBERS_NODES,
+            "fabric_h5": root / FABRIC_H5,
+            "flow_grid": root / FLOW_GRID,
+        }
+
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         h = super().input_hashes(ctx)
-        for key, p in _paths(ctx).items():
+        for key, p in self.needs(ctx).items():
             if p.is_file():
                 h[key] = file_hash(p)
         exe = ctx.build_dir / "bin" / "fiberdem"
@@ -244,7 +243,7 @@ class Laydown(Stage):
         return h
 
     def preflight(self, ctx: StageContext) -> None:
-        for key, p in _paths(ctx).items():
+        for key, p in self.needs(ctx).items():
             if not p.is_file():
                 raise StageError(f"{p} missing ({key}): run the generate, fabric and flow stages "
                                  "first (fiberform run SCENE runs them in order)")
@@ -256,7 +255,7 @@ class Laydown(Stage):
         scene = ctx.scene
         ld, f, dom = scene.laydown, scene.fibers, scene.domain
         assert ld is not None and f is not None and dom is not None
-        paths = _paths(ctx)
+        paths = self.needs(ctx)
         work = self.stage_dir(ctx) / "work"
         resume_step = resume_point(work, hashes) if ctx.options.get("resume") else None
         if resume_step is None:

@@ -213,6 +213,9 @@ class PermeabilityStage(Stage):
             )
         return problems
 
+    def needs(self, ctx: StageContext) -> dict[str, Path]:
+        return self._upstream(ctx)
+
     def _upstream(self, ctx: StageContext) -> dict[str, Path]:
         root = ctx.scene.output_path
         paths = {"fabric_h5": root / FABRIC_H5}

@@ -276,7 +276,7 @@ class Press(Stage):
                          f"{a['hold_pressure_max_dev'] * 100:.2f} %)")
             return [line]
 
-    def _upstream(self, ctx: StageContext) -> dict[str, Path]:
+    def needs(self, ctx: StageContext) -> dict[str, Path]:
         root = ctx.scene.output_path
         return {"laydown_h5": root / LAYDOWN_H5, "laydown_restart": root / LAYDOWN_RESTART,
                 "fibers_h5": root / FIBERS_H5, "fibers_nodes": root / FIBERS_NODES,
@@ -297,7 +297,7 @@ class Press(Stage):
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         h = super().input_hashes(ctx)
-        for key, path in self._upstream(ctx).items():
+        for key, path in self.needs(ctx).items():
             if path.is_file():
                 h[key] = file_hash(path)
         exe = ctx.build_dir / "bin" / "fiberdem"
@@ -306,7 +306,7 @@ class Press(Stage):
         return h
 
     def preflight(self, ctx: StageContext) -> None:
-        for key, path in self._upstream(ctx).items():
+        for key, path in self.needs(ctx).items():
             if not path.is_file():
                 raise ConfigError(f"press: {path} missing ({key}): run the lay-down first "
                                   "(`fiberform laydown SCENE`, or `fiberform run SCENE`)")
@@ -319,7 +319,7 @@ class Press(Stage):
         scene = ctx.scene
         pr, dom = scene.press, scene.domain
         assert pr is not None and dom is not None
-        up = self._upstream(ctx)
+        up = self.needs(ctx)
         p = plan(scene, scene.output_path)
         work = self.stage_dir(ctx) / "work"
         if work.exists():

@@ -1,0 +1,174 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The stage graph of a scene: order, selection and status (issue 14).
+
+Each stage declares the upstream products it reads (:meth:`Stage.needs`) and the products it makes
+(:meth:`Stage.product_paths`); stage B runs after stage A when B needs one of A's products. The
+order is a topological sort of that graph (ties broken by the registration order of
+:data:`fiberform.stages.STAGES`), so adding a stage never needs an edit here.
+
+Status of a stage (``fiberform status SCENE``):
+
+* ``done``: every product exists and its HDF5 file records the input hashes the stage would
+  compute now;
+* ``stale``: products exist but an input changed (scene section, upstream file, binary, code
+  version), or an upstream stage is not done;
+* ``missing``: products absent;
+* ``running``: the stage folder's ``stage-state.json`` names a live process on this host;
+* ``failed``: it names an error, or a process that is gone (killed).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import ConfigError
+from .provenance import read_provenance
+from .scene import Scene
+from .stages import STAGES, Stage, StageContext
+
+__all__ = ["StageGraph", "StageStatus", "applicable_stages"]
+
+
+def applicable_stages(scene: Scene) -> list[Stage]:
+    """The stages whose required scene sections are present, in registration order."""
+    return [s for s in STAGES.values() if all(getattr(scene, r) is not None for r in s.requires)]
+
+
+@dataclass(frozen=True)
+class StageStatus:
+    """One line of ``fiberform status``."""
+
+    stage: str
+    state: str  # done | stale | missing | running | failed
+    detail: str  # why stale, the error, times
+
+
+class StageGraph:
+    """The dependency graph of the given stages for one scene (``ctx``)."""
+
+    def __init__(self, stages: Sequence[Stage], ctx: StageContext) -> None:
+        self.ctx = ctx
+        self.stages = {s.name: s for s in stages}
+        producer = {p: s.name for s in stages for p in s.product_paths(ctx)}
+        #: stage -> the stages it needs, and the needed files no stage here makes
+        self.upstream: dict[str, tuple[str, ...]] = {}
+        self.external: dict[str, tuple[Path, ...]] = {}
+        for s in stages:
+            needs = s.needs(ctx).values()
+            self.upstream[s.name] = tuple(dict.fromkeys(producer[p] for p in needs if p in producer))
+            self.external[s.name] = tuple(p for p in needs if p not in producer)
+        self.order = self._sorted()
+
+    def _sorted(self) -> list[str]:
+        rank = {name: i for i, name in enumerate(self.stages)}
+        pending = {n: set(up) for n, up in self.upstream.items()}
+        order: list[str] = []
+        while pending:
+            ready = sorted((n for n, up in pending.items() if not up), key=rank.__getitem__)
+            if not ready:
+                raise ConfigError("stage graph has a cycle among: " + ", ".join(sorted(pending)))
+            n = ready[0]
+            order.append(n)
+            del pending[n]
+            for up in pending.values():
+                up.discard(n)
+        return order
+
+    def _closure(self, name: str, down: bool) -> set[str]:
+        edges = self.upstream if not down else {
+            n: tuple(m for m, up in self.upstream.items() if n in up) for n in self.upstream}
+        seen, todo = {name}, [name]
+        while todo:
+            for m in edges[todo.pop()]:
+                if m not in seen:
+                    seen.add(m)
+                    todo.append(m)
+        return seen
+
+    def _known(self, name: str, option: str) -> None:
+        if name not in self.stages:
+            raise ConfigError(f"{option} {name!r}: not a stage of this scene (its stages: "
+                              f"{', '.join(self.order)})")
+
+    def select(self, start: str | None = None, stop: str | None = None) -> list[Stage]:
+        """The stages from ``start`` (it and everything downstream of it) to ``stop`` (it and
+        everything upstream of it), in pipeline order; all when both are None."""
+        keep = set(self.order)
+        if start is not None:
+            self._known(start, "--from")
+            keep &= self._closure(start, down=True)
+        if stop is not None:
+            self._known(stop, "--to")
+            keep &= self._closure(stop, down=False)
+        if not keep:
+            raise ConfigError(f"--from {start!r} --to {stop!r}: {stop!r} does not depend on {start!r}, "
+                              "so nothing lies between them")
+        return [self.stages[n] for n in self.order if n in keep]
+
+    def check_names(self, names: Sequence[str], option: str) -> None:
+        for n in names:
+            self._known(n, option)
+
+    def status(self) -> list[StageStatus]:
+        """The state of every stage, in pipeline order (reads files only)."""
+        out: dict[str, StageStatus] = {}
+        for name in self.order:
+            st = _stage_status(self.stages[name], self.ctx)
+            late = [u for u in self.upstream[name] if out[u].state != "done"]
+            if st.state == "done" and late:
+                st = StageStatus(name, "stale", f"upstream not done: {', '.join(late)}")
+            out[name] = st
+        return list(out.values())
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _stage_status(stage: Stage, ctx: StageContext) -> StageStatus:
+    name = stage.name
+    state_file = stage.state_path(ctx)
+    if state_file.is_file():
+        try:
+            rec = json.loads(state_file.read_text())
+        except (OSError, ValueError):
+            rec = {"state": "failed", "error": f"unreadable {state_file}"}
+        if rec.get("state") == "running":
+            here = rec.get("host") == socket.gethostname()
+            if not here or _pid_alive(int(rec.get("pid", 0))):
+                where = "" if here else f" on {rec.get('host')}"
+                return StageStatus(name, "running", f"since {rec.get('started_utc')}{where} (pid {rec.get('pid')})")
+            return StageStatus(name, "failed", f"process {rec.get('pid')} started {rec.get('started_utc')} "
+                                               "is gone (killed?)")
+        if rec.get("state") == "failed":
+            return StageStatus(name, "failed", f"at {rec.get('failed_utc')}: {rec.get('error')}")
+    paths = stage.product_paths(ctx)
+    if not all(p.is_file() for p in paths):
+        return StageStatus(name, "missing", "")
+    try:
+        prov = read_provenance(paths[0])
+    except OSError:
+        return StageStatus(name, "stale", f"{paths[0].name} unreadable")
+    when = f"{prov.get('created_utc', '?')}"
+    if "elapsed_s" in prov:
+        when += f", {float(prov['elapsed_s']):.1f} s"
+    try:
+        hashes = stage.input_hashes(ctx)
+    except Exception as exc:  # a scene a stage cannot hash yet (missing upstream): stale  # noqa: BLE001
+        return StageStatus(name, "stale", f"inputs unreadable: {exc}")
+    recorded = prov.get("input_hashes", {})
+    changed = sorted(k for k in set(hashes) | set(recorded) if hashes.get(k) != recorded.get(k))
+    if prov.get("stage") != name or changed:
+        return StageStatus(name, "stale", f"changed: {', '.join(changed) or 'stage'} (made {when})")
+    return StageStatus(name, "done", when)
