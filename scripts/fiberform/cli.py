@@ -8,7 +8,6 @@ options), 130 interrupted. Errors go to stderr as ``fiberform: error: ...``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -17,7 +16,7 @@ from pathlib import Path
 from . import __version__
 from ._versions import build_dir, component_versions
 from .errors import ConfigError, FiberformError, SceneError
-from .pipeline import StageGraph, applicable_stages
+from .pipeline import StageGraph, applicable_stages, plan_run, run_pipeline
 from .provenance import atomic_write_text
 from .scene import SECTIONS, Scene, field_table, load_scene
 from .stages import STAGES, Stage, StageContext
@@ -153,61 +152,41 @@ def _cmd_run(args: argparse.Namespace) -> int:
     """The stages the scene enables (or those between --from and --to), in the order of the stage
     graph, then a pipeline report."""
     scene = load_scene(args.scene)
-    graph = _graph(args, scene)
-    if not graph.order:
-        raise SceneError(str(args.scene), ["(scene): enables no stage; see docs/stages/scene-format.md"])
-    stages = graph.select(args.start, args.stop)
-    forced: set[str]
-    if args.force is None:
-        forced = set()
-    elif not args.force:  # --force alone: every selected stage
-        forced = {st.name for st in stages}
-    else:
-        graph.check_names(args.force, "--force")
-        outside = [n for n in args.force if n not in {st.name for st in stages}]
-        if outside:
-            raise ConfigError(f"--force {outside[0]!r}: not among the stages selected by --from/--to "
-                              f"({', '.join(st.name for st in stages)})")
-        forced = set(args.force)
-    problems: list[str] = []
-    for st in stages:  # check everything before anything is written
-        problems.extend(st.check_scene(scene))
-    if problems:
-        raise SceneError(str(args.scene), list(dict.fromkeys(problems)))
     ctx = _context(args, scene)
-    outcomes = []
-    for i, st in enumerate(stages, 1):
-        print(f"[{i}/{len(stages)}] {st.name}: {st.summary}", flush=True)
-        outcome = st.execute(dataclasses.replace(ctx, force=st.name in forced,
-                                                 options={**ctx.options, "force": st.name in forced}))
-        outcomes.append(outcome)
-        state = "up to date" if outcome.skipped else f"done in {outcome.elapsed_s:.2f} s"
-        if outcome.message not in ("done", "up to date"):
-            state += f" ({outcome.message})"
-        print(f"[{i}/{len(stages)}] {st.name}: {state}", flush=True)
-    root = scene.output_path
-    lines = [
-        f"# fiberform run: scene `{scene.name}`",
-        "",
-        f"Scene file `{args.scene}`, seed {scene.seed}, fiberform {__version__}.",
-        "",
-        "| stage | status | wall time (s) | products |",
-        "|---|---|---|---|",
-    ]
-    for o in outcomes:
-        products = ", ".join(f"`{p.relative_to(root) if p.is_relative_to(root) else p}`" for p in o.products)
-        status = "up to date (earlier run)" if o.skipped else "ran"
-        if o.message not in ("done", "up to date"):
-            status += f" ({o.message})"
-        lines.append(f"| {o.stage} | {status} | {o.elapsed_s:.2f} | {products} |")
-    results = [line for st in stages for line in st.results(ctx)]
-    if results:
-        lines += ["", "## Results", "", *(f"- {line}" for line in results)]
-    lines += ["", "Each stage folder holds its own `report.md` (where the stage writes one) and the logs "
-              "of the programs it ran (`log.<tool>`)."]
-    report = root / "report.md"
-    atomic_write_text(report, "\n".join(lines) + "\n")
-    print(f"run: {len(outcomes)} stage(s); report {report}")
+    stages, forced = plan_run(ctx, args.start, args.stop, args.force)
+    outcomes = run_pipeline(ctx, stages, forced)
+    print(f"run: {len(outcomes)} stage(s); report {scene.output_path / 'report.md'}")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    """Expand the scene into variants (--set values x --seeds), write them, run them."""
+    from .sweep import expand, parse_set, run_sweep, write_sweep
+
+    sets = [parse_set(t) for t in args.set or []]
+    base = Path(args.scene)
+    sweep_dir, variants = expand(base, sets, args.seeds, args.first_seed)
+    # --from/--to and the stage checks, before anything is written
+    plan_run(StageContext(scene=load_scene(base), scene_path=base, build_dir=Path(args.build_dir)),
+             args.start, args.stop, None)
+    files = write_sweep(base, sweep_dir, variants, sets)
+    print(f"sweep: {len(files)} variant(s) in {sweep_dir} (record {sweep_dir / 'sweep.json'})")
+    if args.no_run:
+        return 0
+    failed = run_sweep(files, Path(args.build_dir), args.start, args.stop,
+                       lambda line: print(line, flush=True))
+    if failed:
+        print(f"fiberform: error: {len(failed)} variant(s) failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    print(f"sweep: all {len(files)} variant(s) done; `fiberform collect {sweep_dir}` tabulates them")
+    return 0
+
+
+def _cmd_collect(args: argparse.Namespace) -> int:
+    from .sweep import collect
+
+    out_csv, out_png, n = collect(Path(args.sweep), Path(args.build_dir))
+    print(f"collect: {n} variant(s) -> {out_csv}, {out_png}")
     return 0
 
 
@@ -284,6 +263,27 @@ def build_parser() -> argparse.ArgumentParser:
                    help="continue an interrupted stage from its last restart file (laydown)")
     add_build(p)
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("sweep", help="expand SCENE into variants (--set values x --seeds), write them under "
+                       "<output_dir>-sweep/ and run each through the stage graph")
+    p.add_argument("scene", metavar="SCENE", help="base scene YAML file")
+    p.add_argument("--set", action="append", metavar="FIELD=V1,V2,...",
+                   help="a dotted scene field and its values (repeat for a grid), e.g. "
+                   "fibers.target_mass_kg=1.0e-9,2.0e-9")
+    p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds per value set (default 1)")
+    p.add_argument("--first-seed", type=int, default=None, metavar="S",
+                   help="first seed (default: the scene's seed); the others follow: S+1, ...")
+    p.add_argument("--from", dest="start", metavar="STAGE", help="as for run")
+    p.add_argument("--to", dest="stop", metavar="STAGE", help="as for run (e.g. --to laydown)")
+    p.add_argument("--no-run", action="store_true", help="write the variants and sweep.json only")
+    add_build(p)
+    p.set_defaults(func=_cmd_sweep)
+
+    p = sub.add_parser("collect", help="gather the key results of a sweep's variants into collect.csv and "
+                       "collect.png")
+    p.add_argument("sweep", metavar="SWEEP_DIR", help="the folder `fiberform sweep` wrote (holds sweep.json)")
+    add_build(p)
+    p.set_defaults(func=_cmd_collect)
 
     p = sub.add_parser("status", help="show each stage of the scene as done / stale / missing / running / "
                        "failed (reads files only)")

@@ -19,19 +19,21 @@ Status of a stage (``fiberform status SCENE``):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import socket
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import ConfigError
-from .provenance import read_provenance
+from . import __version__
+from .errors import ConfigError, SceneError
+from .provenance import atomic_write_text, read_provenance
 from .scene import Scene
-from .stages import STAGES, Stage, StageContext
+from .stages import STAGES, Outcome, Stage, StageContext
 
-__all__ = ["StageGraph", "StageStatus", "applicable_stages"]
+__all__ = ["StageGraph", "StageStatus", "applicable_stages", "plan_run", "run_pipeline"]
 
 
 def applicable_stages(scene: Scene) -> list[Stage]:
@@ -172,3 +174,68 @@ def _stage_status(stage: Stage, ctx: StageContext) -> StageStatus:
     if prov.get("stage") != name or changed:
         return StageStatus(name, "stale", f"changed: {', '.join(changed) or 'stage'} (made {when})")
     return StageStatus(name, "done", when)
+
+
+def plan_run(ctx: StageContext, start: str | None = None, stop: str | None = None,
+             force: Sequence[str] | None = None) -> tuple[list[Stage], set[str]]:
+    """The stages of ``fiberform run`` (``--from``/``--to``) and the ones to redo (``--force``:
+    None = none, empty = all selected, else those named), after every selected stage's scene
+    checks (SceneError, exit status 2, before anything is written)."""
+    graph = StageGraph(applicable_stages(ctx.scene), ctx)
+    if not graph.order:
+        raise SceneError(str(ctx.scene_path), ["(scene): enables no stage; see docs/stages/scene-format.md"])
+    stages = graph.select(start, stop)
+    names = [st.name for st in stages]
+    if force is None:
+        forced: set[str] = set()
+    elif not force:
+        forced = set(names)
+    else:
+        graph.check_names(force, "--force")
+        outside = [n for n in force if n not in names]
+        if outside:
+            raise ConfigError(f"--force {outside[0]!r}: not among the stages selected by --from/--to "
+                              f"({', '.join(names)})")
+        forced = set(force)
+    problems = [p for st in stages for p in st.check_scene(ctx.scene)]
+    if problems:
+        raise SceneError(str(ctx.scene_path), list(dict.fromkeys(problems)))
+    return stages, forced
+
+
+def run_pipeline(ctx: StageContext, stages: Sequence[Stage], forced: set[str],
+                 echo: Callable[[str], None] = lambda line: print(line, flush=True)) -> list[Outcome]:
+    """Execute ``stages`` in order (each skipped when up to date unless forced) and write
+    ``<output_dir>/report.md``: one row per stage and each stage's key results."""
+    outcomes = []
+    for i, st in enumerate(stages, 1):
+        echo(f"[{i}/{len(stages)}] {st.name}: {st.summary}")
+        redo = st.name in forced
+        outcome = st.execute(dataclasses.replace(ctx, force=redo, options={**ctx.options, "force": redo}))
+        outcomes.append(outcome)
+        state = "up to date" if outcome.skipped else f"done in {outcome.elapsed_s:.2f} s"
+        if outcome.message not in ("done", "up to date"):
+            state += f" ({outcome.message})"
+        echo(f"[{i}/{len(stages)}] {st.name}: {state}")
+    scene, root = ctx.scene, ctx.scene.output_path
+    lines = [
+        f"# fiberform run: scene `{scene.name}`",
+        "",
+        f"Scene file `{ctx.scene_path}`, seed {scene.seed}, fiberform {__version__}.",
+        "",
+        "| stage | status | wall time (s) | products |",
+        "|---|---|---|---|",
+    ]
+    for o in outcomes:
+        products = ", ".join(f"`{p.relative_to(root) if p.is_relative_to(root) else p}`" for p in o.products)
+        status = "up to date (earlier run)" if o.skipped else "ran"
+        if o.message not in ("done", "up to date"):
+            status += f" ({o.message})"
+        lines.append(f"| {o.stage} | {status} | {o.elapsed_s:.2f} | {products} |")
+    results = [line for st in stages for line in st.results(ctx)]
+    if results:
+        lines += ["", "## Results", "", *(f"- {line}" for line in results)]
+    lines += ["", "Each stage folder holds its own `report.md` (where the stage writes one) and the logs "
+              "of the programs it ran (`log.<tool>`)."]
+    atomic_write_text(root / "report.md", "\n".join(lines) + "\n")
+    return outcomes

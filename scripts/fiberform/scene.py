@@ -58,6 +58,7 @@ __all__ = [
     "field_table",
     "load_scene",
     "parse_scene",
+    "read_scene_yaml",
     "scene_problem",
     "section_hash",
 ]
@@ -1206,6 +1207,12 @@ def parse_scene(
         raise SceneError(source, _format_errors(exc, key_lines or {})) from None
 
 
+def read_scene_yaml(text: str) -> Any:
+    """YAML text read as scene files are (``1e-3`` is a float, duplicate keys refused); raises
+    yaml.YAMLError."""
+    return yaml.load(text, Loader=_SceneLoader)  # noqa: S506 - SafeLoader subclass
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; every failure is a SceneError (exit status 2)."""
     p = Path(path)
@@ -1227,7 +1234,7 @@ def load_scene(path: str | Path) -> Scene:
     except UnicodeDecodeError as exc:
         raise SceneError(source, [f"not UTF-8 text (byte {exc.start})"], _CANNOT) from None
     try:
-        data = yaml.load(text, Loader=_SceneLoader)  # noqa: S506 - SafeLoader subclass
+        data = read_scene_yaml(text)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "unknown position"

@@ -112,6 +112,12 @@ class Stage(abc.ABC):
     def state_path(self, ctx: StageContext) -> Path:
         return self.stage_dir(ctx) / STATE_NAME
 
+    def metrics(self, ctx: StageContext) -> dict[str, float]:
+        """Key numbers of a finished stage, read back from its HDF5 product, for sweeps
+        (``fiberform collect``); SI units in the key names (``sheet_thickness_m``). None by
+        default."""
+        return {}
+
     def results(self, ctx: StageContext) -> list[str]:
         """Key results of a finished stage, one line each, read back from its HDF5 product (the
         run report's "Results"); none by default."""

@@ -441,6 +441,13 @@ class Generate(Stage):
     products = (H5_NAME, DATA_NAME, NODES_NAME, INPUT_NAME)
     code_version = 1
 
+    def metrics(self, ctx: StageContext) -> dict[str, float]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            mass = np.asarray(h5["fibers/mass"][...], dtype=np.float64)
+            fine = np.asarray(h5["fibers/is_fine"][...], dtype=bool)
+        return {"fibers": float(len(mass)), "fines": float(np.count_nonzero(fine)),
+                "fiber_mass_kg": float(np.sum(mass))}
+
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         h = super().input_hashes(ctx)
         g = getattr(ctx.scene, "fiber_generation", None)

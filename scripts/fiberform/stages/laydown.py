@@ -179,6 +179,13 @@ class Laydown(Stage):
     products = (H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME, SHEET_RESTART)
     code_version = 2
 
+    def metrics(self, ctx: StageContext) -> dict[str, float]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            a = h5["run"].attrs
+            return {"settled": float(bool(a["settled"])), "laydown_simulated_time_s": float(a["simulated_time_s"]),
+                    "sheet_thickness_m": float(a["sheet_thickness_m"]),
+                    "grammage_kg_m2": float(a["grammage_kg_m2"])}
+
     def results(self, ctx: StageContext) -> list[str]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
             a = h5["run"].attrs

@@ -263,6 +263,13 @@ class Press(Stage):
     products = (H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME, REPORT_NAME, RESTART_NAME)
     code_version = 1
 
+    def metrics(self, ctx: StageContext) -> dict[str, float]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            c, a = h5["curve"], h5["run"].attrs
+            return {"press_plate_gap_m": float(c["plate_z"][-1] - a["fabric_top_z_m"]),
+                    "press_max_pressure_Pa": float(np.nanmax(c["pressure"][...])),
+                    "pressed_span_thickness_m": float(c["thickness_span"][-1])}
+
     def results(self, ctx: StageContext) -> list[str]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
             c, a = h5["curve"], h5["run"].attrs

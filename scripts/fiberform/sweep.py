@@ -1,0 +1,248 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Parameter sweeps and seed ensembles (issue 14): ``fiberform sweep`` and ``fiberform collect``.
+
+A sweep expands a base scene into variants: the Cartesian product of the ``--set PATH=V1,V2,...``
+values and ``--seeds N`` seeds (base seed, base seed + 1, ...). Each variant is a complete scene file
+``<sweep dir>/scenes/<name>_<k>.yaml`` (name ``<base name>_<k>``, output in ``<sweep dir>/<name>_<k>/``),
+validated like any scene before anything is written; ``<sweep dir>/sweep.json`` records the base
+scene (path and hash), the grid and every variant (file, output folder, seed, values). The sweep
+dir is ``<base output_dir>-sweep``. Variants then run one after the other through the stage graph
+(:func:`fiberform.pipeline.run_pipeline`), each skipped stage by stage when up to date, so a sweep is
+resumed by running the same command again. ``fiberform collect SWEEP_DIR`` reads each variant's
+key results (:meth:`Stage.metrics`) and stage wall times into ``collect.csv`` and ``collect.png``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import math
+import shutil
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from . import __version__
+from .errors import ConfigError, FiberformError
+from .pipeline import applicable_stages, plan_run, run_pipeline
+from .provenance import atomic_write_text, file_hash, read_provenance
+from .scene import load_scene, parse_scene, read_scene_yaml
+from .stages import StageContext
+
+__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "write_sweep"]
+
+SWEEP_JSON, COLLECT_CSV, COLLECT_PNG = "sweep.json", "collect.csv", "collect.png"
+#: fields a sweep sets itself
+RESERVED = ("name", "seed", "output_dir")
+MAX_VARIANTS = 1000
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    seed: int
+    values: dict[str, Any]  # dotted field path -> value
+    data: dict[str, Any]  # the complete scene mapping
+
+
+def parse_set(text: str) -> tuple[str, list[Any]]:
+    """``fibers.target_mass_kg=1e-9,2e-9`` -> ("fibers.target_mass_kg", [1e-9, 2e-9]); each value
+    is read as a YAML scalar (number, bool, string). ConfigError names the option."""
+    path, sep, values = text.partition("=")
+    parts = path.split(".")
+    if not sep or not values or not all(p.isidentifier() for p in parts):
+        raise ConfigError(f"--set {text!r}: expected SECTION.FIELD=V1[,V2,...] (a dotted scene field path, "
+                          "then comma-separated values)")
+    if parts[0] in RESERVED:
+        raise ConfigError(f"--set {text!r}: {parts[0]} is set by the sweep itself (use --seeds for seeds)")
+    out = []
+    for v in values.split(","):
+        try:
+            x = read_scene_yaml(v)
+        except yaml.YAMLError:
+            x = None
+        if not isinstance(x, (int, float, str, bool)) or v.strip() == "":
+            raise ConfigError(f"--set {text!r}: value {v!r} is not a number, boolean or word")
+        out.append(x)
+    if len(set(map(repr, out))) != len(out):
+        raise ConfigError(f"--set {text!r}: a value is repeated")
+    return path, out
+
+
+def _put(data: dict[str, Any], path: str, value: Any) -> None:
+    node = data
+    keys = path.split(".")
+    for k in keys[:-1]:
+        child = node.get(k)
+        if child is None:
+            child = node[k] = {}
+        if not isinstance(child, dict):
+            raise ConfigError(f"--set {path}: {k} is not a section")
+        node = child
+    node[keys[-1]] = value
+
+
+def expand(base_path: Path, sets: Sequence[tuple[str, list[Any]]], seeds: int,
+           first_seed: int | None = None) -> tuple[Path, list[Variant]]:
+    """The sweep dir and the validated variants (SceneError / ConfigError before anything is
+    written)."""
+    base = load_scene(base_path)
+    raw = read_scene_yaml(base_path.read_text())
+    if seeds < 1:
+        raise ConfigError(f"--seeds {seeds}: must be at least 1")
+    paths = [p for p, _ in sets]
+    if len(set(paths)) != len(paths):
+        raise ConfigError(f"--set: field given twice ({', '.join(paths)})")
+    s0 = base.seed if first_seed is None else first_seed
+    if not 0 <= s0 <= 2**31 - 1 - seeds:
+        raise ConfigError(f"--first-seed {s0}: seeds must lie in [0, 2^31 - 1]")
+    grid = list(itertools.product(*(v for _, v in sets), range(s0, s0 + seeds)))
+    if len(grid) > MAX_VARIANTS:
+        raise ConfigError(f"--set/--seeds: {len(grid)} variants (limit {MAX_VARIANTS})")
+    sweep_dir = Path(f"{base.output_path}-sweep")
+    stem = base.name[:56]
+    variants = []
+    for k, combo in enumerate(grid):
+        data = json.loads(json.dumps(raw))  # a deep copy of plain YAML data
+        values = dict(zip(paths, combo[:-1], strict=True))
+        for p, v in values.items():
+            _put(data, p, v)
+        name = f"{stem}_{k:03d}"
+        data.update(name=name, seed=combo[-1], output_dir=str(sweep_dir / name))
+        label = ", ".join(f"{p}={v!r}" for p, v in values.items()) or "base"
+        parse_scene(data, f"{base_path} variant {k} ({label}, seed {combo[-1]})")
+        variants.append(Variant(name, int(combo[-1]), values, data))
+    return sweep_dir, variants
+
+
+def write_sweep(base_path: Path, sweep_dir: Path, variants: Sequence[Variant],
+                sets: Sequence[tuple[str, list[Any]]]) -> list[Path]:
+    """Write the variant scene files and sweep.json (each atomically); returns the scene files.
+    A data file the base scene names relative to itself (``fiber_generation.data_csv``) is
+    copied beside the variants."""
+    scenes = sweep_dir / "scenes"
+    scenes.mkdir(parents=True, exist_ok=True)
+    base = load_scene(base_path)
+    gen = getattr(base, "fiber_generation", None)
+    csv_name = getattr(gen, "data_csv", None) if gen is not None else None
+    if csv_name:
+        src = base_path.parent / csv_name
+        dst = scenes / csv_name
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, dst)
+    files = []
+    for v in variants:
+        f = scenes / f"{v.name}.yaml"
+        header = (f"# fiberform sweep variant of {base_path} (fiberform {__version__}); "
+                  f"values: {json.dumps(v.values)}; seed {v.seed}\n")
+        atomic_write_text(f, header + yaml.safe_dump(v.data, sort_keys=False))
+        files.append(f)
+    record = {
+        "fiberform": __version__,
+        "base_scene": str(base_path),
+        "base_scene_hash": file_hash(base_path),
+        "set": {p: vals for p, vals in sets},
+        "seeds": sorted({v.seed for v in variants}),
+        "variants": [{"name": v.name, "scene": str(f.relative_to(sweep_dir)), "output_dir": v.data["output_dir"],
+                      "seed": v.seed, "values": v.values} for v, f in zip(variants, files, strict=True)],
+    }
+    atomic_write_text(sweep_dir / SWEEP_JSON, json.dumps(record, indent=2) + "\n")
+    return files
+
+
+def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
+              echo: Callable[[str], None]) -> list[str]:
+    """Run each variant's pipeline; returns the names of the variants that failed (the others
+    still run)."""
+    failed = []
+    for i, f in enumerate(files, 1):
+        echo(f"== variant {i}/{len(files)}: {f} ==")
+        try:
+            scene = load_scene(f)
+            ctx = StageContext(scene=scene, scene_path=f, build_dir=build_dir)
+            stages, forced = plan_run(ctx, start, stop, None)
+            run_pipeline(ctx, stages, forced, echo)
+        except FiberformError as exc:
+            echo(f"variant {f.stem} FAILED: {exc}")
+            failed.append(f.stem)
+    return failed
+
+
+def _read_record(sweep_dir: Path) -> dict[str, Any]:
+    path = sweep_dir / SWEEP_JSON if sweep_dir.is_dir() else sweep_dir
+    try:
+        rec: dict[str, Any] = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: not found (give the sweep folder that `fiberform sweep` wrote)") from None
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: unreadable sweep record ({exc})") from None
+    return rec
+
+
+def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
+    """collect.csv (one row per variant: seed, swept values, every stage's metrics and wall time;
+    empty where a stage has not finished) and collect.png; returns the paths and the row count."""
+    rec = _read_record(sweep_dir)
+    root = sweep_dir if sweep_dir.is_dir() else sweep_dir.parent
+    paths = list(rec["set"])
+    rows: list[dict[str, Any]] = []
+    columns: list[str] = []
+    for v in rec["variants"]:
+        f = root / v["scene"]
+        scene = load_scene(f)
+        ctx = StageContext(scene=scene, scene_path=f, build_dir=build_dir)
+        row: dict[str, Any] = {"variant": v["name"], "seed": v["seed"], **v["values"]}
+        for st in applicable_stages(scene):
+            prods = st.product_paths(ctx)
+            if not all(p.is_file() for p in prods):
+                continue
+            for key, value in st.metrics(ctx).items():
+                row[key] = value
+                columns.append(key)
+            prov = read_provenance(prods[0])
+            if "elapsed_s" in prov:
+                row[f"{st.name}_wall_s"] = float(prov["elapsed_s"])
+                columns.append(f"{st.name}_wall_s")
+        rows.append(row)
+    header = ["variant", "seed", *paths, *dict.fromkeys(c for c in columns if c not in paths)]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=header, restval="", lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    out_csv, out_png = root / COLLECT_CSV, root / COLLECT_PNG
+    atomic_write_text(out_csv, buf.getvalue())
+    _plot(rows, paths, [c for c in header[2 + len(paths):] if not c.endswith("_wall_s")], out_png)
+    return out_csv, out_png, len(rows)
+
+
+def _plot(rows: list[dict[str, Any]], paths: list[str], metrics: list[str], out: Path) -> None:
+    """Each metric against the first swept field (or the variant number), one point per variant,
+    the mean over seeds as a line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = metrics[:6] or ["seed"]
+    xkey = paths[0] if paths and all(isinstance(r.get(paths[0]), (int, float)) for r in rows) else None
+    fig, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.0), squeeze=False)
+    for ax, m in zip(axes[0], shown, strict=False):
+        pts = [(float(r[xkey]) if xkey else i, float(r[m])) for i, r in enumerate(rows)
+               if isinstance(r.get(m), (int, float)) and math.isfinite(float(r[m]))]
+        if pts:
+            xs, ys = zip(*pts, strict=True)
+            ax.plot(xs, ys, "o", alpha=0.6)
+            means = {x: sum(y for xx, y in pts if xx == x) / sum(1 for xx, _ in pts if xx == x) for x in sorted(set(xs))}
+            ax.plot(list(means), list(means.values()), "-", color="k", lw=1)
+        ax.set_xlabel(xkey or "variant")
+        ax.set_title(m, fontsize=9)
+    fig.tight_layout()
+    tmp = out.with_name(out.name + ".in_progress.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(out)

@@ -1,0 +1,90 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""``fiberform sweep`` and ``fiberform collect`` (issue 14): 2 values x 2 seeds through the real
+generate stage, one CSV row per variant, and bad sweeps refused with nothing written."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+SCENE = """name: sw
+seed: 3
+domain:
+  lo_m: [0.0, 0.0, 0.0]
+  hi_m: [0.003, 0.003, 0.003]
+fibers:
+  target_mass_kg: 1.0e-9
+  length_m: 1.0e-3
+  width_m: 30.0e-6
+  segments: 10
+  density_kg_m3: 1500.0
+  youngs_modulus_Pa: 10.0e9
+  shear_modulus_Pa: 4.0e9
+run:
+  timestep_s: 1.0e-9
+  duration_s: 1.0e-8
+"""
+
+
+def _ff(d: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "fiberform", *args], cwd=d, capture_output=True, text=True,
+                          errors="replace", timeout=600, check=False)
+
+
+def test_two_values_by_two_seeds(tmp_path: Path) -> None:
+    (tmp_path / "s.yaml").write_text(SCENE)
+    r = _ff(tmp_path, "sweep", "s.yaml", "--set", "fibers.target_mass_kg=1.0e-9,2.5e-9", "--seeds", "2")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    sweep = tmp_path / "runs" / "sw-sweep"
+    rec = json.loads((sweep / "sweep.json").read_text())
+    assert [(v["values"]["fibers.target_mass_kg"], v["seed"]) for v in rec["variants"]] == [
+        (1.0e-9, 3), (1.0e-9, 4), (2.5e-9, 3), (2.5e-9, 4)]
+    r = _ff(tmp_path, "collect", str(sweep))
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader((sweep / "collect.csv").open()))
+    assert len(rows) == 4 and (sweep / "collect.png").stat().st_size > 0
+    for row, v in zip(rows, rec["variants"], strict=True):
+        assert row["variant"] == v["name"] and int(row["seed"]) == v["seed"]
+        # generation adds fibers until the target mass is reached: target <= mass < target + one fiber
+        with h5py.File(tmp_path / v["output_dir"] / "fibers" / "fibers.h5") as h5:
+            heaviest = float(np.max(h5["fibers/mass"][...]))
+            assert h5.attrs["seed"] == v["seed"]
+        target = float(row["fibers.target_mass_kg"])
+        assert target <= float(row["fiber_mass_kg"]) < target + heaviest, row
+        assert float(row["generate_wall_s"]) > 0
+    # the seeds give different fiber sets; a second sweep finds every variant up to date
+    assert rows[0]["fiber_mass_kg"] != rows[1]["fiber_mass_kg"]
+    again = _ff(tmp_path, "sweep", "s.yaml", "--set", "fibers.target_mass_kg=1.0e-9,2.5e-9", "--seeds", "2")
+    assert again.returncode == 0 and again.stdout.count("generate: up to date") == 4, again.stdout
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--set", "fibers.target_mass_kg=-1.0e-9,1.0e-9"], "fibers.target_mass_kg"),
+    (["--set", "fibers.no_such_field=1"], "no_such_field"),
+    (["--set", "seed=1,2"], "--set"),
+    (["--set", "fibers.target_mass_kg"], "--set"),
+    (["--set", "fibers.target_mass_kg=1e-9,1e-9"], "repeated"),
+    (["--set", "fibers.width_m=[1,2]"], "--set"),
+    (["--set", "fibers.length_m=1e-3", "--set", "fibers.length_m=2e-3"], "twice"),
+    (["--seeds", "0"], "--seeds"),
+    (["--to", "lay-down"], "--to 'lay-down'"),
+    (["--set", "fibers.length_m=1.0e-3;rm,2.0e-3"], "fibers.length_m"),
+])
+def test_bad_sweep_exits_2_and_writes_nothing(tmp_path: Path, args: list[str], words: str) -> None:
+    (tmp_path / "s.yaml").write_text(SCENE)
+    r = _ff(tmp_path, "sweep", "s.yaml", *args)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert words in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.yaml"]
+
+
+def test_collect_without_a_sweep_exits_2(tmp_path: Path) -> None:
+    r = _ff(tmp_path, "collect", "nowhere")
+    assert r.returncode == 2 and "sweep.json" in r.stderr or "not found" in r.stderr, r.stderr
