@@ -14,23 +14,9 @@ import h5py
 import numpy as np
 import pytest
 
-SCENE = """name: sw
-seed: 3
-domain:
-  lo_m: [0.0, 0.0, 0.0]
-  hi_m: [0.003, 0.003, 0.003]
-fibers:
-  target_mass_kg: 1.0e-9
-  length_m: 1.0e-3
-  width_m: 30.0e-6
-  segments: 10
-  density_kg_m3: 1500.0
-  youngs_modulus_Pa: 10.0e9
-  shear_modulus_Pa: 4.0e9
-run:
-  timestep_s: 1.0e-9
-  duration_s: 1.0e-8
-"""
+from test_generate import SCENE as GENERATE_SCENE  # noqa: E402 - the generate tests' scene
+
+SCENE = GENERATE_SCENE.replace("name: gen_test", "name: sw")
 
 
 def _ff(d: Path, *args: str) -> subprocess.CompletedProcess[str]:
