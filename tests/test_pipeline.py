@@ -120,6 +120,18 @@ def _status(d: Path) -> dict[str, tuple[str, str]]:
     return out
 
 
+def _processes_in(d: Path) -> list[str]:
+    """Command lines of the processes whose working directory lies under d."""
+    out = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if Path(os.readlink(f"/proc/{pid}/cwd")).is_relative_to(d) and int(pid) != os.getpid():
+                out.append(Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode())
+        except OSError:
+            continue
+    return out
+
+
 def _start_flow(d: Path) -> subprocess.Popen[str]:
     """`fiberform flow` in its own session; returns once its status says running."""
     proc = subprocess.Popen([sys.executable, "-m", "fiberform", "flow", "s.yaml", "--force"], cwd=d, env=ENV,
@@ -155,6 +167,16 @@ def test_status_through_run_change_interrupt_and_kill(tmp_path: Path) -> None:
     state, detail = _status(d)["flow"]
     assert proc.returncode == 130 and state == "failed" and "interrupted" in detail, (proc.returncode, detail)
     assert not (d / "runs/pipe/flow/flow.h5").exists()
+
+    # SIGTERM to fiberform alone (a batch system's time limit): it stops its OpenFOAM children
+    # (they run in a session of their own), records failed, exits 143
+    proc = _start_flow(d)
+    time.sleep(1.0)  # into the OpenFOAM tools
+    os.kill(proc.pid, signal.SIGTERM)
+    proc.wait(timeout=120)
+    state, detail = _status(d)["flow"]
+    assert proc.returncode == 143 and state == "failed" and "SIGTERM" in detail, (proc.returncode, detail)
+    assert _processes_in(d) == [], _processes_in(d)
 
     # killed outright (SIGKILL, no chance to clean up): failed, the process is gone
     proc = _start_flow(d)

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from . import __version__
 from ._versions import build_dir, component_versions
-from .errors import ConfigError, FiberformError, SceneError
+from .errors import ConfigError, FiberformError, SceneError, Terminated
 from .pipeline import StageGraph, applicable_stages, plan_run, run_pipeline
 from .provenance import atomic_write_text
 from .scene import SECTIONS, Scene, field_table, load_scene
@@ -303,6 +304,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fiberform`` console script; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         status: int = args.func(args)
         return status
@@ -312,3 +314,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("fiberform: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("fiberform: terminated (SIGTERM)", file=sys.stderr)
+        return 143
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated()

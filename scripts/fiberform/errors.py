@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 __all__ = [
+    "Terminated",
     "ConfigError",
     "FiberformError",
     "InputFormatError",
@@ -89,3 +90,11 @@ class StageError(FiberformError):
     """A stage could not produce its products (missing input, unreadable result, ...)."""
 
     exit_status = 1
+
+
+class Terminated(BaseException):  # noqa: N818 - a signal, like KeyboardInterrupt
+    """SIGTERM arrived (a batch system's time limit, ``kill``): raised in the main thread so the
+    running program is stopped, the stage records ``failed`` and nothing half-written stays."""
+
+    def __str__(self) -> str:
+        return "terminated (SIGTERM)"

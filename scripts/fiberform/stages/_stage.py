@@ -200,7 +200,7 @@ class Stage(abc.ABC):
         except BaseException as exc:
             for t in tmp.values():
                 t.unlink(missing_ok=True)
-            reason = "interrupted" if isinstance(exc, KeyboardInterrupt) else (str(exc) or type(exc).__name__)
+            reason = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else (str(exc) or type(exc).__name__)
             atomic_write_text(state, json.dumps({"state": "failed", "stage": self.name, "started_utc": started,
                                                  "failed_utc": _now(), "error": reason[:2000]}) + "\n")
             raise
