@@ -68,6 +68,15 @@ def test_from_and_to_select_downstream_and_upstream(demo: StageGraph) -> None:
         demo.select("lay-down")
 
 
+def test_from_with_missing_upstream_products_exits_2(tmp_path: Path) -> None:
+    shutil.copy(ROOT / "scenes" / "demo.yaml", tmp_path / "demo.yaml")
+    r = subprocess.run([sys.executable, "-m", "fiberform", "run", "demo.yaml", "--from", "laydown"], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=120, check=False)
+    assert r.returncode == 2, r.stderr
+    assert "--from laydown: laydown needs runs/demo/fibers/fibers.h5 (fibers_h5) from stage generate" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.yaml"]
+
+
 class _Fake(Stage):
     summary, requires, uses, code_version = "fake", (), (), 1
 

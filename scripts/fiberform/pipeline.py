@@ -200,6 +200,15 @@ def plan_run(ctx: StageContext, start: str | None = None, stop: str | None = Non
     problems = [p for st in stages for p in st.check_scene(ctx.scene)]
     if problems:
         raise SceneError(str(ctx.scene_path), list(dict.fromkeys(problems)))
+    for st in stages:  # products of the stages left out by --from must exist already
+        for up in graph.upstream[st.name]:
+            if up in names:
+                continue
+            for key, path in st.needs(ctx).items():
+                if path in graph.stages[up].product_paths(ctx) and not path.is_file():
+                    raise ConfigError(f"--from {start}: {st.name} needs {path} ({key}) from stage {up}, "
+                                      f"which is missing; run `fiberform run {ctx.scene_path} --to {up}` "
+                                      "first, or start earlier")
     return stages, forced
 
 
