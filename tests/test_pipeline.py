@@ -212,3 +212,24 @@ def test_status_through_run_change_interrupt_and_kill(tmp_path: Path) -> None:
     assert r.returncode == 2 and "--force 'flow'" in r.stderr, r.stderr
     r = _ff(d, "run", "s.yaml", "--from", "nosuch")
     assert r.returncode == 2 and "--from 'nosuch': not a stage" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    (["run", "demo.yaml", "--from", "lay-down"], "--from 'lay-down': not a stage"),
+    (["run", "demo.yaml", "--to", "pressing"], "--to 'pressing': not a stage"),
+    (["run", "demo.yaml", "--from", "press", "--to", "flow"], "does not depend"),
+    (["run", "demo.yaml", "--from", "permeability", "--to", "press"], "does not depend"),
+    (["run", "demo.yaml", "--force", "nosuch"], "--force 'nosuch': not a stage"),
+    (["run", "demo.yaml", "--to", "flow", "--force", "laydown"], "--force 'laydown': not among"),
+    (["run", "demo.yaml", "--from", "press"], "press needs"),
+    (["run", "demo.yaml", "--from", "demo-particles"], "--from 'demo-particles': not a stage of this scene"),
+    (["status", "missing.yaml"], "file not found"),
+    (["run", "missing.yaml"], "file not found"),
+])
+def test_bad_run_commands_exit_2_and_write_nothing(tmp_path: Path, args: list[str], words: str) -> None:
+    shutil.copy(ROOT / "scenes" / "demo.yaml", tmp_path / "demo.yaml")
+    r = subprocess.run([sys.executable, "-m", "fiberform", *args], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120, check=False)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert words in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.yaml"]
