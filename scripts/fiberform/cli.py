@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from . import __version__
+from . import __version__, executors
 from ._versions import build_dir, component_versions
 from .errors import ConfigError, FiberformError, SceneError, Terminated
 from .pipeline import StageGraph, applicable_stages, plan_run, run_pipeline
@@ -141,11 +141,49 @@ def _cmd_status(args: argparse.Namespace) -> int:
     if not graph.order:
         raise SceneError(str(args.scene), ["(scene): enables no stage; see docs/stages/scene-format.md"])
     rows = graph.status()
+    records = executors.read_records(scene.output_path)
+    if records:
+        rows = executors.annotate_status(rows, executors.queue_states(
+            {s: r for s, r in records.items() if s in graph.stages}))
     width = max(len(r.stage) for r in rows)
     print(f"scene '{scene.name}', output {scene.output_path}")
     for r in rows:
         needs = ", ".join(graph.upstream[r.stage]) or "-"
         print(f"  {r.stage:<{width}}  {r.state:<7}  {r.detail}" + (f"  [needs: {needs}]" if args.verbose else ""))
+    return 0
+
+
+def _cmd_submit(args: argparse.Namespace) -> int:
+    """One batch job per stage that is not done, chained by afterok dependencies (Slurm / PBS)."""
+    opts = executors.batch_options(args.scheduler, partition=args.partition, account=args.account,
+                                   qos=args.qos, time=args.time, nodes=args.nodes, ntasks=args.ntasks)
+    scene = load_scene(args.scene)
+    graph = _graph(args, scene)
+    stages, forced = plan_run(graph.ctx, args.start, args.stop, args.force, require_upstream=False)
+    workdir = Path.cwd()
+    out_dir = (workdir / scene.output_path).resolve()
+    records = executors.read_records(out_dir)
+    states = executors.queue_states({s: r for s, r in records.items() if s in graph.stages})
+    specs = executors.plan_jobs(graph, opts, start=args.start, stop=args.stop, forced=forced, workdir=workdir,
+                                python=executors.default_python(), states=states)
+    if not specs:
+        print(f"submit: nothing to do: the selected stages ({', '.join(st.name for st in stages)}) are done "
+              "(--force STAGE to redo)")
+        return 0
+    if not args.dry_run:
+        executors.check_submit_program(opts)
+    replay = executors.write_scripts(opts, specs, workdir)
+    if args.dry_run:
+        for s in specs:
+            print(f"==> {s.script} <==\n{s.text}")
+        print(f"submit: dry run: {len(specs)} script(s) written, nothing submitted; {replay} submits them")
+        return 0
+    made = executors.submit_jobs(opts, specs, out_dir, workdir)
+    for rec in made:
+        after = f" after {':'.join(rec.after)}" if rec.after else ""
+        print(f"{rec.stage}: {rec.scheduler} job {rec.job_id}{after} ({rec.script})")
+    print(f"submit: {len(made)} job(s) recorded in {out_dir / executors.JOBS_FOLDER / executors.RECORDS_NAME}; "
+          f"`fiberform status {args.scene}` shows their states")
     return 0
 
 
@@ -286,8 +324,30 @@ def build_parser() -> argparse.ArgumentParser:
     add_build(p)
     p.set_defaults(func=_cmd_collect)
 
+    p = sub.add_parser("submit", help="write one Slurm or PBS batch script per stage that is not done and "
+                       "submit them with afterok dependencies (job IDs in <output_dir>/jobs/jobs.json)")
+    p.add_argument("scene", metavar="SCENE", help="scene YAML file")
+    p.add_argument("--scheduler", required=True, choices=executors.SCHEDULERS,
+                   help="slurm (sbatch) or pbs (qsub)")
+    p.add_argument("--partition", metavar="NAME", help=f"partition (Slurm) or queue (PBS -q); ^{executors.NAME_PATTERN}$")
+    p.add_argument("--account", metavar="NAME", help=f"account to charge; ^{executors.NAME_PATTERN}$")
+    p.add_argument("--qos", metavar="NAME", help=f"quality of service (Slurm only); ^{executors.NAME_PATTERN}$")
+    p.add_argument("--time", metavar="LIMIT", help=f"wall-time limit of each job: {executors.TIME_FORM}")
+    p.add_argument("--nodes", metavar="N", help="nodes per job (default: the scheduler's)")
+    p.add_argument("--ntasks", metavar="N",
+                   help="tasks per job (default: the stage's MPI ranks; never fewer than those)")
+    p.add_argument("--from", dest="start", metavar="STAGE", help="start at STAGE (as in `run`)")
+    p.add_argument("--to", dest="stop", metavar="STAGE", help="stop at STAGE (as in `run`)")
+    p.add_argument("--force", nargs="*", metavar="STAGE",
+                   help="submit the named stages (no name: every selected stage) even when done; they "
+                   "run with --force")
+    p.add_argument("--dry-run", action="store_true",
+                   help="write and print the scripts, submit nothing")
+    add_build(p)
+    p.set_defaults(func=_cmd_submit)
+
     p = sub.add_parser("status", help="show each stage of the scene as done / stale / missing / running / "
-                       "failed (reads files only)")
+                       "failed, or queued for a submitted job (reads files and the queue)")
     p.add_argument("scene", metavar="SCENE", help="scene YAML file")
     p.add_argument("-v", "--verbose", action="store_true", help="also list each stage's upstream stages")
     add_build(p)

@@ -177,10 +177,12 @@ def _stage_status(stage: Stage, ctx: StageContext) -> StageStatus:
 
 
 def plan_run(ctx: StageContext, start: str | None = None, stop: str | None = None,
-             force: Sequence[str] | None = None) -> tuple[list[Stage], set[str]]:
+             force: Sequence[str] | None = None, require_upstream: bool = True) -> tuple[list[Stage], set[str]]:
     """The stages of ``fiberform run`` (``--from``/``--to``) and the ones to redo (``--force``:
     None = none, empty = all selected, else those named), after every selected stage's scene
-    checks (SceneError, exit status 2, before anything is written)."""
+    checks (SceneError, exit status 2, before anything is written). ``require_upstream``: the
+    products of upstream stages left out by ``--from`` must exist (``submit`` checks queued jobs
+    instead)."""
     graph = StageGraph(applicable_stages(ctx.scene), ctx)
     if not graph.order:
         raise SceneError(str(ctx.scene_path), ["(scene): enables no stage; see docs/stages/scene-format.md"])
@@ -200,7 +202,7 @@ def plan_run(ctx: StageContext, start: str | None = None, stop: str | None = Non
     problems = [p for st in stages for p in st.check_scene(ctx.scene)]
     if problems:
         raise SceneError(str(ctx.scene_path), list(dict.fromkeys(problems)))
-    for st in stages:  # products of the stages left out by --from must exist already
+    for st in stages if require_upstream else ():  # products of stages left out by --from exist
         for up in graph.upstream[st.name]:
             if up in names:
                 continue

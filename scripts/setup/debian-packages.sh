@@ -22,6 +22,12 @@ PINNED=(
   "xz-utils="
   "patch="
   "bzip2="
+  # Slurm for tests/test_submit.py (fiberform submit): its fixture starts slurmctld + slurmd on
+  # localhost with a private slurm.conf; the packages start no daemon themselves (their services
+  # need /etc/slurm/slurm.conf, which is not written).
+  "slurmctld="
+  "slurmd="
+  "slurm-client="
 )
 
 missing=()

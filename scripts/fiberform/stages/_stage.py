@@ -109,6 +109,14 @@ class Stage(abc.ABC):
         declarations: a stage runs after the stages whose products it needs. None by default."""
         return {}
 
+    def ranks(self, ctx: StageContext) -> int:
+        """MPI ranks the stage's external programs run on (what a batch job for the stage asks
+        for). Default: the ``ranks`` field of the stage's own scene section (the last of
+        :attr:`requires`), else 1."""
+        section = getattr(ctx.scene, self.requires[-1], None) if self.requires else None
+        value = getattr(section, "ranks", 1)
+        return value if isinstance(value, int) and not isinstance(value, bool) and value >= 1 else 1
+
     def state_path(self, ctx: StageContext) -> Path:
         return self.stage_dir(ctx) / STATE_NAME
 

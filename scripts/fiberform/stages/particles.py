@@ -226,6 +226,9 @@ class DemoParticles(Stage):
     def fiberdem(self, ctx: StageContext) -> Path:
         return ctx.build_dir / "bin" / "fiberdem"
 
+    def ranks(self, ctx: StageContext) -> int:
+        return ctx.scene.run.ranks
+
     def preflight(self, ctx: StageContext) -> None:
         exe = self.fiberdem(ctx)
         if not exe.is_file():
