@@ -46,6 +46,13 @@ def _scene(work: Path, out: str, ranks: int) -> Path:
     return p
 
 
+def _cwd_under(pid: str, d: Path) -> bool:
+    try:
+        return Path(os.readlink(f"/proc/{pid}/cwd")).is_relative_to(d) and int(pid) != os.getpid()
+    except OSError:
+        return False
+
+
 def _sheet(h5: Path) -> tuple[np.ndarray, np.ndarray]:
     with h5py.File(h5, "r") as h:
         return h["sheet/x"][...], h["sheet/fiber_id"][...]
@@ -72,14 +79,19 @@ def test_restart_files_are_written(reference: tuple[Path, Path]) -> None:
     assert names == sorted(f"laydown.{k * 1000}.restart" for k in range(1, 7)), names
 
 
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
 def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], build_dir: Path,
-                                                  fiberform_cmd: list[str]) -> None:
+                                                  fiberform_cmd: list[str], how: str) -> None:
+    """SIGKILL to the whole process group (a node failure), or SIGTERM to fiberform alone (a
+    batch time limit: fiberform stops fiberdem and its ranks itself, records failed, exits 143)."""
     work, scene = reference
-    x_ref, id_ref = _sheet(work / "runs/a/laydown/laydown.h5")
     ref_copy = work / "reference.h5"
-    (work / "runs/a/laydown/laydown.h5").replace(ref_copy)
+    if not ref_copy.is_file():
+        shutil.copyfile(work / "runs/a/laydown/laydown.h5", ref_copy)
+    x_ref, id_ref = _sheet(ref_copy)
+    (work / "runs/a/laydown/laydown.h5").unlink(missing_ok=True)
     lw = work / "runs/a/laydown/work"
-    shutil.rmtree(lw)  # the restart files of the reference run must not be mistaken for new ones
+    shutil.rmtree(lw, ignore_errors=True)  # earlier restart files must not be mistaken for new ones
     proc = subprocess.Popen([*fiberform_cmd, "laydown", scene.name, "--force", "--build-dir",
                              str(build_dir)], cwd=work, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
@@ -89,12 +101,22 @@ def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], 
         while time.monotonic() < deadline and proc.poll() is None:
             if (lw / "laydown.3000.restart").is_file():
                 killed_after = 3000
+                if how == "SIGTERM":
+                    proc.send_signal(signal.SIGTERM)
+                    proc.wait(timeout=60)
                 break
             time.sleep(0.05)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
+    if how == "SIGTERM":
+        assert proc.returncode == 143, proc.returncode
+        state = (work / "runs/a/laydown/stage-state.json").read_text()
+        assert '"failed"' in state and "SIGTERM" in state, state
+        alive = [pid for pid in filter(str.isdigit, os.listdir("/proc"))
+                 if _cwd_under(pid, work)]
+        assert not alive, "fiberdem left running after SIGTERM"
     assert killed_after is not None, "the lay-down ended before its third restart file"
     assert not (work / "runs/a/laydown/laydown.h5").exists()  # no product of a killed run
     res = subprocess.run([*fiberform_cmd, "laydown", scene.name, "--resume", "--build-dir",
