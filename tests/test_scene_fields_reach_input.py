@@ -97,7 +97,7 @@ PERM_ALTERNATIVES: dict[str, object] = {
     "max_cell_height_m": 1.0e-4, "max_cells": 3_000_000, "max_iterations": 500,
     "residual_tolerance": 1.0e-5, "convergence_window": 50, "convergence_tolerance": 1.0e-2,
     "ranks": 2, "mode": "subgrid", "subgrid_cell_size_m": 40.0e-6,
-    "subgrid_law": "drummond_tahir",
+    "subgrid_law": "drummond_tahir", "forchheimer_pressure_drop_Pa": 60.0,
 }
 PERM_SINGLE_CHOICE: set[str] = set()
 PERM_SUBGRID_ONLY = {"subgrid_cell_size_m", "subgrid_law"}
@@ -108,7 +108,7 @@ def _perm_effect(perm_fields: dict[str, object]) -> tuple[object, ...]:
     the solid sampling, the refusal limit and the convergence criterion."""
     from fiberform.porous_media import flow_rate_convergence, subgrid_resistance
     from fiberform.scene import PermeabilitySection
-    from fiberform.stages.permeability import PermeabilityGeometry, case_setup
+    from fiberform.stages.permeability import PermeabilityGeometry, case_setup, forchheimer_setup
 
     perm = PermeabilitySection.model_validate(perm_fields)
     geo = PermeabilityGeometry(1.0e-3, 1.0e-3, 2.0e-3, 2.6e-3, 20.0e-6, ())
@@ -116,7 +116,8 @@ def _perm_effect(perm_fields: dict[str, object]) -> tuple[object, ...]:
     conv = flow_rate_convergence(history, perm.convergence_window, perm.convergence_tolerance)
     law = (subgrid_resistance(np.array([0.1]), 10e-6, perm.subgrid_law).tolist()
            if perm.mode == "subgrid" else None)  # fmt: skip
-    return case_setup(perm, geo), perm.subsamples, perm.max_cells, conv, law
+    return (case_setup(perm, geo), forchheimer_setup(perm, geo), perm.subsamples, perm.max_cells,
+            conv, law)  # fmt: skip
 
 
 def test_every_permeability_field_has_an_alternative() -> None:

@@ -37,6 +37,7 @@ __all__ = [
     "NODES_NAME",
     "Fiber",
     "fiber_preamble",
+    "outer_half_axes",
     "write_nodes_subset",
     "quat_from_frames",
     "quat_rotate",
@@ -51,6 +52,16 @@ DATA_NAME = "fibers.data"
 NODES_NAME = "fibers.nodes"
 
 Array = npt.NDArray[np.float64]
+
+
+def outer_half_axes(cross_section: str, w: float, aspect: float = 0.25) -> tuple[float, float]:
+    """Nominal outer semi-axes (a1, a2) [m] of a generated section (thesis sec. 3.4), before the
+    per-node jitter: ``w`` is the thesis' w [m] (the outer radius of a circular section, half the
+    scene's ``fibers.width_m``); circular a1 = a2 = w; collapsed ("rectangular") a1 = 0.8 w,
+    a2 = a1 ``aspect`` (``fibers.thickness_m / fibers.width_m``; the thesis' 0.2 w for 1/4)."""
+    if cross_section == "circular":
+        return w, w
+    return 0.8 * w, 0.8 * w * aspect
 
 
 @dataclass

@@ -52,10 +52,24 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Chain:
-    """A chain of capsules: centre-line points (m, 3) [m] and one radius [m]."""
+    """A chain of fiber or yarn elements along the centre-line points (m, 3) [m]. Circular
+    section (``half_thickness`` None): capsules of ``radius`` [m]. Rectangular section (collapsed
+    fibers, thesis sec. 2.4.3): boxes ``2 radius`` wide and ``2 half_thickness`` thick [m], the
+    thickness along :func:`fiberform.porous_media.flat_thickness_dir` of each element (the
+    vertical made perpendicular to the element: the fiber lies flat)."""
 
     points: FloatArray
-    radius: float
+    radius: float  #: circular: the radius; rectangular: half the width [m]
+    half_thickness: float | None = None  #: rectangular: half the thickness [m]; None: circular
+
+    @property
+    def rectangular(self) -> bool:
+        return self.half_thickness is not None
+
+    @property
+    def thickness(self) -> float:
+        """The thinnest dimension of the section [m]: the diameter, or the thickness."""
+        return 2.0 * (self.radius if self.half_thickness is None else self.half_thickness)
 
 
 def read_fabric_image(path: Path) -> VoxelImage:
@@ -85,9 +99,15 @@ def read_yarn_chains(path: Path) -> list[Chain]:
     return [Chain(pts[offs[i] : offs[i + 1]].copy(), float(rad[i])) for i in range(len(rad))]
 
 
-def read_sheet_chains(laydown_h5: Path, fibers_h5: Path) -> list[Chain]:
-    """The fibers on the laid-down sheet (final snapshot of ``laydown.h5``) as capsule chains, each
-    with the largest outer section radius of its fiber in ``fibers.h5`` (circular sections)."""
+def read_sheet_chains(laydown_h5: Path, fibers_h5: Path, cross_section: str = "circular") -> list[Chain]:
+    """The fibers on the laid-down (or pressed: ``press.h5`` has the same ``/sheet``) sheet, final
+    snapshot, as element chains with the largest outer section half-axes of their fiber in
+    ``fibers.h5`` (``/fibers/radii[:, :2]``, the per-node jitter of the generate stage). Sections
+    as ``cross_section`` (the scene's ``fibers.cross_section``): circular, radius the largest a1 or
+    a2; rectangular (collapsed), half-width the largest max(a1, a2) and half-thickness the largest
+    min(a1, a2)."""
+    if cross_section not in ("circular", "rectangular"):
+        raise ValueError(f"cross_section {cross_section!r}: expected circular or rectangular")
     with h5py.File(laydown_h5, "r") as f:
         x = np.asarray(f["sheet/x"][...], dtype=np.float64)
         offs = np.asarray(f["sheet/offsets"][...], dtype=np.int64)
@@ -97,8 +117,12 @@ def read_sheet_chains(laydown_h5: Path, fibers_h5: Path) -> list[Chain]:
         radii = np.asarray(f["fibers/radii"][...], dtype=np.float64)
     chains = []
     for k, fid in enumerate(ids):
-        r = float(np.max(radii[f_offs[fid] : f_offs[fid + 1], :2]))
-        chains.append(Chain(x[offs[k] : offs[k + 1]].copy(), r))
+        ax = radii[f_offs[fid] : f_offs[fid + 1], :2]
+        pts = x[offs[k] : offs[k + 1]].copy()
+        if cross_section == "circular":
+            chains.append(Chain(pts, float(np.max(ax))))
+        else:
+            chains.append(Chain(pts, float(np.max(ax.max(axis=1))), float(np.max(ax.min(axis=1)))))
     return chains
 
 

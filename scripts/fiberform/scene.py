@@ -631,6 +631,12 @@ class PermeabilitySection(_Section):
         "Pressure drop from the top to the bottom of the domain (125 Pa: ASTM D737)", "Pa",
         default=125.0, gt=0.0, le=1.0e5,
     )  # fmt: skip
+    forchheimer_pressure_drop_Pa: float | None = quantity(
+        "Second pressure drop: a second run at it, and the Darcy permeability k_D and Forchheimer "
+        "coefficient beta of dp / L = (mu / k_D) u + beta rho u^2 fitted through the two runs "
+        "(absent: one run, no fit; must differ from pressure_drop_Pa)", "Pa", default=None,
+        gt=0.0, le=1.0e5,
+    )  # fmt: skip
     mode: Literal["resolved", "subgrid"] = choice(
         "How the fibers enter the flow: resolved (cells removed where fibers and yarns are, cells "
         "of thinnest fiber / cells_across_fiber) or subgrid (cells of subgrid_cell_size_m; yarns "
@@ -647,8 +653,9 @@ class PermeabilitySection(_Section):
         "Drummond & Tahir 1984)", default="jackson_james",
     )
     cells_across_fiber: int = quantity(
-        "CFD cells across the thinnest fiber (bare fabric: across the thinnest yarn); sets the "
-        "cubic cell size of the solid zone", "1", default=4, ge=1, le=64,
+        "CFD cells across the thinnest fiber (its diameter, or the thickness of a collapsed "
+        "fiber; bare fabric: across the thinnest yarn); sets the cubic cell size of the solid "
+        "zone", "1", default=4, ge=1, le=64,
     )  # fmt: skip
     subsamples: int = quantity(
         "Sample points per cell edge for the solid volume fraction of a cell (subsamples^3 per "
@@ -699,6 +706,10 @@ class PermeabilitySection(_Section):
         if self.convergence_window > self.max_iterations:
             raise scene_problem("convergence_window", "must not exceed max_iterations "
                                 f"= {self.max_iterations!r}", self.convergence_window)
+        if self.forchheimer_pressure_drop_Pa == self.pressure_drop_Pa:
+            raise scene_problem("forchheimer_pressure_drop_Pa", "must differ from "
+                                f"pressure_drop_Pa = {self.pressure_drop_Pa!r} (two points are "
+                                "needed for the fit)", self.forchheimer_pressure_drop_Pa)
         return self
 
 

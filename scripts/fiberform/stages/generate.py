@@ -30,7 +30,10 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..fabric_geometry import segment_distances
-from ..fiber_io import DATA_NAME, NODES_NAME, Fiber, fiber_preamble, quat_from_frames, write_fibers_liggghts
+from ..fiber_io import (
+    DATA_NAME, NODES_NAME, Fiber, fiber_preamble, outer_half_axes, quat_from_frames,
+    write_fibers_liggghts,
+)  # fmt: skip
 from ..inputs import LiggghtsInput
 from ..provenance import file_hash, write_dataset
 from ._stage import Stage, StageContext
@@ -136,10 +139,8 @@ def section_radii(shape: FiberShape, rng: np.random.Generator) -> Array:
     """(n+1, 4) radii a1, a2, b1, b2 with a small random variation per node."""
     n1 = shape.segments + 1
     w = shape.width_m
-    if shape.cross_section == "circular":
-        a = np.array([w, w])
-    else:  # collapsed ("rectangular" in the thesis): a1 = 0.8 w, a2 = 0.2 w by default
-        a = np.array([0.8 * w, 0.8 * w * shape.aspect])
+    # collapsed ("rectangular" in the thesis): a1 = 0.8 w, a2 = 0.2 w by default
+    a = np.array(outer_half_axes(shape.cross_section, w, shape.aspect))
     jit = 1.0 + rng.uniform(-shape.radius_jitter, shape.radius_jitter, size=(n1, 1))
     outer = a[None, :] * jit
     inner = outer * (1.0 - shape.wall_fraction)

@@ -8,14 +8,20 @@ stage: symmetry on the four vertical sides, fixed pressure at the top and the bo
 zero-gradient velocity, no-slip on yarns and fibers; laminar steady Navier-Stokes (stock simpleFoam,
 SIMPLEC) through :mod:`fiberform.openfoam_case`. Mode ``resolved``: the solid zone (fabric lower
 side to the top of the sheet) has cubic cells of d_min / ``cells_across_fiber`` (d_min: the
-thinnest fiber diameter, or the thinnest yarn for a bare fabric); each zone cell gets the fraction
-of its ``subsamples``^3 sample points inside a fiber or yarn (capsule chains: the yarns of the
-generated fabric and the sheet's fibers; imported fabrics through their voxel image), and the cells
-with the largest fractions are removed until the removed volume equals the sampled solid volume
-(:func:`fiberform.openfoam_case.volume_preserving`). Mode ``subgrid``: cells of
+thinnest fiber diameter or, for collapsed fibers, thickness; the thinnest yarn for a bare
+fabric); each zone cell gets the fraction of its ``subsamples``^3 sample points inside a fiber or
+yarn (capsule chains: the yarns of the generated fabric and circular fibers; box chains with
+mitred joints: collapsed fibers, lying flat; imported fabrics through their voxel image), and the
+cells with the largest fractions are removed until the removed volume equals the sampled solid
+volume (:func:`fiberform.openfoam_case.volume_preserving`). Mode ``subgrid``: cells of
 ``subgrid_cell_size_m``; yarns removed as above, fibers as a Darcy resistance 1/k(phi) per cell from
 the cell's fiber volume fraction and ``subgrid_law`` (Jackson & James 1986 or Drummond & Tahir 1984;
-:mod:`fiberform.porous_media`), applied through OpenFOAM's explicitPorositySource.
+:mod:`fiberform.porous_media`; collapsed fibers: the law's radius is the hydraulic radius 2 A / P of
+the section), applied through OpenFOAM's explicitPorositySource.
+
+With ``forchheimer_pressure_drop_Pa`` a second case runs at that pressure drop (in
+``forchheimer/``) and the Darcy permeability k_D and the Forchheimer coefficient beta of
+dp / L = (mu / k_D) u + beta rho u^2 are fitted through the two superficial velocities.
 
 Convergence (thesis sec. 5.2: the permeability "oscillates"): simpleFoam stops when the initial
 residuals of p and U fall below ``residual_tolerance`` or at ``max_iterations``; the outflow through
@@ -30,6 +36,8 @@ the sheet of the lay-down) or ``<output_dir>/permeability-fabric/`` (bare fabric
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import shutil
 import time
 from collections.abc import Mapping
@@ -42,13 +50,14 @@ import numpy.typing as npt
 
 from ..errors import ConfigError, StageError
 from ..fabric_geometry import VoxelImage
+from ..fiber_io import outer_half_axes
 from ..openfoam_case import (
     BoxSetup, CaseResult, Lattice, SolidFraction, make_lattice, plot_section, run_case,
     template_hash, write_solver_record,
 )  # fmt: skip
 from ..porous_media import (
-    CFM_M_S, Convergence, capsule_fraction, flow_rate_convergence, image_fraction,
-    line_fraction, subgrid_resistance,
+    CFM_M_S, Convergence, chain_fraction, flow_rate_convergence, forchheimer_fit,
+    hydraulic_radius, image_fraction, line_fraction, subgrid_resistance,
 )  # fmt: skip
 from ..products import (
     FABRIC_H5, FIBERS_H5, LAYDOWN_H5, PRESS_H5, Chain, read_fabric_image, read_sheet_chains,
@@ -59,11 +68,14 @@ from ..scene import PermeabilitySection, Scene
 from ._stage import Stage, StageContext
 
 __all__ = [
-    "PermeabilityGeometry", "PermeabilityStage", "case_setup", "darcy_permeability",
-    "fiber_resistance", "solid_fraction",
+    "Forchheimer", "PermeabilityGeometry", "PermeabilityStage", "case_setup",
+    "darcy_permeability", "fiber_resistance", "forchheimer_setup", "law_radius",
+    "nominal_fiber_section", "nominal_fiber_thickness", "solid_fraction",
 ]
 
 H5_NAME, REPORT_NAME, PNG_NAME = "permeability.h5", "report.md", "permeability.png"
+#: the second run of the Forchheimer fit: its case and logs, below the stage folder
+FORCHHEIMER_DIR = "forchheimer"
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -76,10 +88,11 @@ class PermeabilityGeometry:
     size_y_m: float
     lower_z_m: float  # fabric lower side
     upper_z_m: float  # highest solid point (fabric or sheet)
-    thinnest_m: float  # diameter of the thinnest fiber (or yarn; or the voxel size)
+    thinnest_m: float  # diameter (collapsed: thickness) of the thinnest fiber (or yarn; or voxel)
     yarns: tuple[Chain, ...]
     fiber_chains: tuple[Chain, ...] = ()
     image: object | None = None  # VoxelImage of an imported fabric (no yarn chains)
+    law_radius_m: float | None = None  # sub-grid law's fiber radius (None: thinnest_m / 2)
 
     @property
     def fibers(self) -> int:
@@ -89,6 +102,28 @@ class PermeabilityGeometry:
 def darcy_permeability(u_s_m_s: float, mu_Pa_s: float, thickness_m: float, dp_Pa: float) -> float:
     """Darcy permeability k = mu u_s L / delta_p [m^2] of a layer of thickness L."""
     return mu_Pa_s * u_s_m_s * thickness_m / dp_Pa
+
+
+def nominal_fiber_section(scene: Scene) -> tuple[float, float]:
+    """(width, thickness) [m] of the scene's generated fiber section before the per-node jitter
+    (:func:`fiberform.fiber_io.outer_half_axes`): circular both the diameter ``fibers.width_m``;
+    collapsed 2 a1 = 0.8 ``fibers.width_m`` and 2 a2 = 0.8 ``fibers.thickness_m``."""
+    f = scene.fibers
+    assert f is not None
+    aspect = f.thickness_m / f.width_m if f.thickness_m is not None else 0.25
+    a1, a2 = outer_half_axes(f.cross_section, 0.5 * f.width_m, aspect)
+    return 2.0 * max(a1, a2), 2.0 * min(a1, a2)
+
+
+def nominal_fiber_thickness(scene: Scene) -> float:
+    """The thinnest dimension [m] of the scene's fiber section (:func:`nominal_fiber_section`)."""
+    return nominal_fiber_section(scene)[1]
+
+
+def law_radius(c: Chain) -> float:
+    """The fiber radius [m] of the sub-grid laws for a chain: its radius (circular) or the
+    hydraulic radius 2 A / P of its rectangular section (:func:`fiberform.porous_media.hydraulic_radius`)."""
+    return c.radius if c.half_thickness is None else hydraulic_radius(c.radius, c.half_thickness)
 
 
 def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup:
@@ -115,12 +150,20 @@ def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup
     )
 
 
+def forchheimer_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup | None:
+    """The second case of the Forchheimer fit (the first at ``forchheimer_pressure_drop_Pa``), None
+    without that field."""
+    if perm.forchheimer_pressure_drop_Pa is None:
+        return None
+    return dataclasses.replace(case_setup(perm, geo), delta_p_Pa=perm.forchheimer_pressure_drop_Pa)
+
+
 def solid_fraction(geo: PermeabilityGeometry, perm: PermeabilitySection) -> SolidFraction:
     """The cells' solid fraction: yarns (or the voxel image) and, in mode resolved, the fibers."""
     chains = list(geo.yarns) + (list(geo.fiber_chains) if perm.mode == "resolved" else [])
 
     def frac(s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float32]:
-        out = capsule_fraction([(c.points, c.radius) for c in chains], s, lat, perm.subsamples)
+        out = chain_fraction(chains, s, lat, perm.subsamples)
         if geo.image is not None:
             img = geo.image
             assert isinstance(img, VoxelImage)
@@ -132,14 +175,16 @@ def solid_fraction(geo: PermeabilityGeometry, perm: PermeabilitySection) -> Soli
 
 def fiber_resistance(geo: PermeabilityGeometry, perm: PermeabilitySection) -> SolidFraction | None:
     """Mode subgrid: Darcy resistance 1/k of each cell from its fiber volume fraction and the
-    law ``subgrid_law`` (fiber radius: the thinnest fiber's); None in mode resolved."""
+    law ``subgrid_law`` (fiber radius ``geo.law_radius_m``: the thinnest fiber's radius, or the
+    smallest hydraulic radius of collapsed sections); None in mode resolved."""
     if perm.mode != "subgrid" or not geo.fiber_chains:
         return None
-    chains = [(c.points, c.radius) for c in geo.fiber_chains]
+    chains = list(geo.fiber_chains)
+    a = geo.law_radius_m if geo.law_radius_m is not None else 0.5 * geo.thinnest_m
 
     def resistance(s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float64]:
         phi = line_fraction(chains, s, lat)
-        return subgrid_resistance(phi, 0.5 * geo.thinnest_m, perm.subgrid_law)
+        return subgrid_resistance(phi, a, perm.subgrid_law)
 
     return resistance
 
@@ -151,7 +196,7 @@ def _expected_cells(scene: Scene) -> tuple[float, float]:
     thick = fab.md_diameter_m * 3 + fab.cd_top_diameter_m + fab.cd_bottom_diameter_m
     thinnest = min(fab.md_diameter_m, fab.cd_top_diameter_m, fab.cd_bottom_diameter_m)
     if scene.laydown is not None and scene.fibers is not None:
-        thinnest = scene.fibers.width_m
+        thinnest = nominal_fiber_thickness(scene)
     if fab.source != "generate":
         thinnest = fab.voxel_size_m
     h = perm.subgrid_cell_size_m if perm.mode == "subgrid" else thinnest / perm.cells_across_fiber
@@ -165,7 +210,7 @@ class PermeabilityStage(Stage):
     requires = ("fabric", "permeability")
     uses = ("fabric", "fibers", "laydown", "permeability")
     products = (H5_NAME, REPORT_NAME, PNG_NAME)
-    code_version = 1
+    code_version = 2
 
     #: the sheet this stage puts on the fabric (a product with /sheet/x, fiber_id, offsets)
     sheet_product = LAYDOWN_H5
@@ -180,9 +225,17 @@ class PermeabilityStage(Stage):
             what = self.stage_dir(ctx).name.removeprefix("permeability-")
             sheet = {"fabric": "bare fabric", "laydown": "fabric + laid-down sheet",
                      "press": "fabric + pressed sheet"}.get(what, what)
-            return [f"air permeability ({sheet}) at {float(r['pressure_drop'][()]):g} Pa: "
-                    f"{float(r['cfm'][()]):.4g} +- {float(r['cfm_uncertainty'][()]):.2g} CFM "
-                    f"({'converged' if r.attrs['converged'] else 'NOT converged'})"]
+            lines = [f"air permeability ({sheet}) at {float(r['pressure_drop'][()]):g} Pa: "
+                     f"{float(r['cfm'][()]):.4g} +- {float(r['cfm_uncertainty'][()]):.2g} CFM "
+                     f"({'converged' if r.attrs['converged'] else 'NOT converged'})"]
+            if "forchheimer" in h5:
+                g = h5["forchheimer"]
+                lines.append(
+                    f"Forchheimer fit ({float(r['pressure_drop'][()]):g} and "
+                    f"{float(g['pressure_drop'][()]):g} Pa): k_D = {float(g['darcy_k'][()]):.4g} "
+                    f"+- {float(g['darcy_k_uncertainty'][()]):.2g} m^2, beta = "
+                    f"{float(g['beta'][()]):.4g} +- {float(g['beta_uncertainty'][()]):.2g} 1/m")
+            return lines
 
     def check_scene(self, scene: Scene) -> list[str]:
         problems = super().check_scene(scene)
@@ -190,20 +243,14 @@ class PermeabilityStage(Stage):
             return problems
         perm = scene.permeability
         assert perm is not None
-        if scene.laydown is not None and scene.fibers is not None:
-            if scene.fibers.cross_section != "circular":
-                problems.append(
-                    "fibers.cross_section = 'rectangular': the permeability stage resolves circular "
-                    "fiber sections only so far (allowed: circular)"
-                )
         h, cells = _expected_cells(scene)
         field = "subgrid_cell_size_m" if perm.mode == "subgrid" else "cells_across_fiber"
         if (perm.mode == "subgrid" and scene.laydown is not None and scene.fibers is not None
-                and perm.subgrid_cell_size_m < scene.fibers.width_m):
+                and perm.subgrid_cell_size_m < nominal_fiber_section(scene)[0]):
             problems.append(
                 f"permeability.subgrid_cell_size_m = {perm.subgrid_cell_size_m!r}: smaller than "
-                f"the fiber width ({scene.fibers.width_m!r} m); the sub-grid laws need cells at "
-                "least one fiber wide (use mode resolved for finer cells)"
+                f"the fiber width ({nominal_fiber_section(scene)[0]!r} m); the sub-grid laws "
+                "need cells at least one fiber wide (use mode resolved for finer cells)"
             )
         if cells > perm.max_cells:
             problems.append(
@@ -243,15 +290,17 @@ class PermeabilityStage(Stage):
         paths = self._upstream(ctx)
         img = read_fabric_image(paths["fabric_h5"])
         yarns = read_yarn_chains(paths["fabric_h5"])
-        fibers = read_sheet_chains(paths["sheet_h5"], paths["fibers_h5"]) if "sheet_h5" in paths else []
+        section = ctx.scene.fibers.cross_section if ctx.scene.fibers is not None else "circular"
+        fibers = (read_sheet_chains(paths["sheet_h5"], paths["fibers_h5"], section)
+                  if "sheet_h5" in paths else [])  # fmt: skip
         up = img.upper
         top = float(up[2])
-        for c in fibers:
-            top = max(top, float(np.max(c.points[:, 2])) + c.radius)
+        for c in fibers:  # a flat element's top lies half a thickness above its axis (at most)
+            top = max(top, float(np.max(c.points[:, 2])) + 0.5 * c.thickness)
         if fibers:
-            thinnest = 2.0 * min(c.radius for c in fibers)
+            thinnest = min(c.thickness for c in fibers)
         elif "sheet_h5" in paths and ctx.scene.fibers is not None:
-            thinnest = ctx.scene.fibers.width_m  # an empty sheet: the mesh of the sheets
+            thinnest = nominal_fiber_thickness(ctx.scene)  # an empty sheet: the mesh of the sheets
         elif yarns:
             thinnest = 2.0 * min(c.radius for c in yarns)
         else:
@@ -265,6 +314,7 @@ class PermeabilityStage(Stage):
             yarns=tuple(yarns),
             fiber_chains=tuple(fibers),
             image=None if yarns else img,
+            law_radius_m=min(law_radius(c) for c in fibers) if fibers else None,
         )
 
     def produce(
@@ -287,20 +337,120 @@ class PermeabilityStage(Stage):
             preserve_volume=True, resistance=fiber_resistance(geo, perm),
             oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
         )  # fmt: skip
-        wall = time.monotonic() - start
         conv = flow_rate_convergence(res.history_q_bottom_m3_s, perm.convergence_window,
                                      perm.convergence_tolerance)  # fmt: skip
+        fh: Forchheimer | None = None
+        s2 = forchheimer_setup(perm, geo)
+        shutil.rmtree(self.stage_dir(ctx) / FORCHHEIMER_DIR, ignore_errors=True)  # a stale one
+        if s2 is not None:  # the second point of the fit: its own case folder, the first kept
+            res2 = run_case(
+                s2, solid_fraction(geo, perm), self.stage_dir(ctx) / FORCHHEIMER_DIR,
+                record_flow_rate=True, preserve_volume=True, resistance=fiber_resistance(geo, perm),
+                oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
+            )  # fmt: skip
+            conv2 = flow_rate_convergence(res2.history_q_bottom_m3_s, perm.convergence_window,
+                                          perm.convergence_tolerance)  # fmt: skip
+            fh = fit_forchheimer(s, conv, s2, conv2, res2, geo.upper_z_m - geo.lower_z_m)
+        wall = time.monotonic() - start
         summary = write_permeability_h5(h5, perm, geo, s, res, conv, wall)
+        if fh is not None:
+            write_forchheimer_h5(h5, fh)
         title = (f"permeability of scene '{ctx.scene.name}' ({geo.fibers} fibers): "
                  f"{summary['cfm']:.4g} +- {summary['cfm_uncertainty']:.2g} CFM at "
                  f"{s.delta_p_Pa:g} Pa")  # fmt: skip
         write_png(tmp[PNG_NAME], s, res, title)
-        tmp[REPORT_NAME].write_text("\n".join(report_lines(ctx.scene.name, perm, geo, s, res, conv,
-                                                           summary, wall)) + "\n")  # fmt: skip
-        if not conv.converged:
-            print(f"permeability: warning: the outflow varied by {conv.relative_amplitude:.2g} of "
-                  f"its mean over the last {conv.window} iterations (tolerance "
-                  f"{perm.convergence_tolerance:g}); see {self.stage_dir(ctx) / REPORT_NAME}")
+        lines = report_lines(ctx.scene.name, perm, geo, s, res, conv, summary, wall)
+        if fh is not None:
+            lines[-2:-2] = forchheimer_lines(fh)
+        tmp[REPORT_NAME].write_text("\n".join(lines) + "\n")
+        for c, dp in ((conv, s.delta_p_Pa), *(((fh.conv, fh.s.delta_p_Pa),) if fh else ())):
+            if not c.converged:
+                print(f"permeability: warning: at {dp:g} Pa the outflow varied by "
+                      f"{c.relative_amplitude:.2g} of its mean over the last {c.window} iterations "
+                      f"(tolerance {perm.convergence_tolerance:g}); see "
+                      f"{self.stage_dir(ctx) / REPORT_NAME}")  # fmt: skip
+        if fh is not None and not fh.physical:
+            print(f"permeability: warning: the Forchheimer fit gives k_D = {fh.darcy_k:.3g} m^2, "
+                  f"beta = {fh.beta:.3g} 1/m (not both positive): the two points do not follow "
+                  "the law; see the report")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Forchheimer:
+    """The fit dp / L = (mu / k_D) u + beta rho u^2 through the runs at the two pressure drops."""
+
+    s: BoxSetup  # the second case
+    res: CaseResult
+    conv: Convergence
+    u1_m_s: float
+    u2_m_s: float
+    darcy_k: float  # m^2
+    darcy_k_uncertainty: float  # m^2
+    beta: float  # 1/m
+    beta_uncertainty: float  # 1/m
+
+    @property
+    def physical(self) -> bool:
+        return bool(self.darcy_k > 0.0 and math.isfinite(self.darcy_k) and self.beta >= 0.0)
+
+
+def fit_forchheimer(s1: BoxSetup, conv1: Convergence, s2: BoxSetup, conv2: Convergence,
+                    res2: CaseResult, thickness_m: float) -> Forchheimer:  # fmt: skip
+    """The fit through the window means of the two runs; its uncertainty is half the range of
+    the fit over the four combinations of u_i +- (the runs' uncertainties)."""
+    area = s1.size_x_m * s1.size_y_m
+    u1, u2 = conv1.mean_m3_s / area, conv2.mean_m3_s / area
+    du1, du2 = conv1.amplitude_m3_s / area, conv2.amplitude_m3_s / area
+
+    def fit(a: float, b: float) -> tuple[float, float]:
+        return forchheimer_fit(a, s1.delta_p_Pa, b, s2.delta_p_Pa, thickness_m,
+                               s1.viscosity_Pa_s, s1.density_kg_m3)  # fmt: skip
+
+    k, beta = fit(u1, u2)
+    corners = [fit(u1 + e1 * du1, u2 + e2 * du2) for e1 in (-1, 1) for e2 in (-1, 1)
+               if u1 + e1 * du1 > 0 and u2 + e2 * du2 > 0 and u1 + e1 * du1 != u2 + e2 * du2]
+    ks, bs = [c[0] for c in corners], [c[1] for c in corners]
+    return Forchheimer(s2, res2, conv2, u1, u2, k, 0.5 * (max(ks) - min(ks)) if ks else math.nan,
+                       beta, 0.5 * (max(bs) - min(bs)) if bs else math.nan)  # fmt: skip
+
+
+def write_forchheimer_h5(h5: h5py.File, fh: Forchheimer) -> None:
+    g = h5.create_group("forchheimer")
+    g.attrs["converged"] = fh.conv.converged
+    g.attrs["physical"] = fh.physical
+    for name, val, unit, desc in (
+        ("pressure_drop", fh.s.delta_p_Pa, "Pa", "pressure drop of the second run"),
+        ("superficial_velocity", fh.u2_m_s, "m/s", "second run: mean outflow over the window / area"),
+        ("superficial_velocity_uncertainty", fh.conv.amplitude_m3_s / (fh.s.size_x_m * fh.s.size_y_m),
+         "m/s", "second run: half the range of the outflow over the window / area"),
+        ("darcy_k", fh.darcy_k, "m^2", "k_D of dp / L = (mu / k_D) u + beta rho u^2 through the "
+         "two runs, L = /result/layer_thickness"),
+        ("darcy_k_uncertainty", fh.darcy_k_uncertainty, "m^2", "half the range of k_D over u_i +- "
+         "their uncertainties"),
+        ("beta", fh.beta, "1/m", "Forchheimer coefficient beta of the same fit"),
+        ("beta_uncertainty", fh.beta_uncertainty, "1/m", "half the range of beta over u_i +- "
+         "their uncertainties"),
+        ("imbalance", fh.res.imbalance, "1", "second run: |q_top - q_bottom| / q_bottom"),
+        ("window_relative_range", fh.conv.relative_amplitude, "1",
+         "second run: (max - min) / mean of the outflow over the window"),
+    ):  # fmt: skip
+        write_dataset(g, name, val, unit, desc)
+    write_dataset(g, "history_q_bottom", fh.res.history_q_bottom_m3_s, "m^3/s",
+                  "second run: outflow through the bottom after each iteration")  # fmt: skip
+    g.attrs["iterations"] = fh.res.iterations
+
+
+def forchheimer_lines(fh: Forchheimer) -> list[str]:
+    return [
+        f"- second run at {fh.s.delta_p_Pa:g} Pa: superficial velocity {fh.u2_m_s * 1e3:.5g} mm/s "
+        f"({fh.u2_m_s / CFM_M_S:.4g} CFM), outflow range over the window "
+        f"{fh.conv.relative_amplitude:.2g} of its mean: "
+        f"{'converged' if fh.conv.converged else '**NOT converged**'}; case `{FORCHHEIMER_DIR}/case/`",
+        f"- Forchheimer fit dp / L = (mu / k_D) u + beta rho u^2 through the two runs: "
+        f"**k_D = {fh.darcy_k:.4g} +- {fh.darcy_k_uncertainty:.2g} m^2, beta = {fh.beta:.4g} +- "
+        f"{fh.beta_uncertainty:.2g} 1/m**"
+        + ("" if fh.physical else " (**not both positive: the points do not follow the law**)"),
+    ]
 
 
 class PermeabilityPressStage(PermeabilityStage):
@@ -397,8 +547,13 @@ def report_lines(
         f"{'met' if res.converged else 'not met'}",
         f"- mass conservation: |inflow - outflow| / outflow = {res.imbalance:.2e}",
         (f"- sub-grid: fibers as a Darcy resistance 1/k(phi) per cell, k from {perm.subgrid_law} "
-         f"(fiber radius {geo.thinnest_m * 0.5e6:.3g} um), yarns removed"
+         f"(fiber radius {(geo.law_radius_m or 0.5 * geo.thinnest_m) * 1e6:.3g} um"
+         f"{', hydraulic radius 2A/P of the collapsed section' if any(c.rectangular for c in geo.fiber_chains) else ''}"
+         "), yarns removed"
          if perm.mode == "subgrid" else "- resolved: fibers and yarns removed from the mesh"),
+        *([f"- fiber sections: collapsed (rectangular), lying flat (thickness vertical, as the "
+           f"contact styles' reference direction), thinnest {geo.thinnest_m * 1e6:.3g} um thick"]
+          if any(c.rectangular for c in geo.fiber_chains) else []),
         f"- mesh (mode {perm.mode}): cells of {s.cell_size_m * 1e6:.3g} um "
         f"({geo.thinnest_m / s.cell_size_m:.3g} across the thinnest fiber/yarn of "
         f"{geo.thinnest_m * 1e6:.3g} um), "
