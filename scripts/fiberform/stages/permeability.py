@@ -219,6 +219,18 @@ class PermeabilityStage(Stage):
         kind = "laydown" if ctx.scene.laydown is not None else "fabric"
         return ctx.scene.output_path / f"{self.folder}-{kind}"
 
+    def metrics(self, ctx: StageContext) -> dict[str, float]:
+        key = self.name.replace("-", "_")
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            r = h5["result"]
+            out = {f"{key}_cfm": float(r["cfm"][()]), f"{key}_cfm_uncertainty": float(r["cfm_uncertainty"][()]),
+                   f"{key}_converged": float(bool(r.attrs["converged"]))}
+            if "darcy_k" in r:
+                out[f"{key}_darcy_k_m2"] = float(r["darcy_k"][()])
+            if "forchheimer" in h5:
+                out[f"{key}_forchheimer_beta_1_m"] = float(h5["forchheimer/beta"][()])
+            return out
+
     def results(self, ctx: StageContext) -> list[str]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
             r = h5["result"]
@@ -261,9 +273,6 @@ class PermeabilityStage(Stage):
         return problems
 
     def needs(self, ctx: StageContext) -> dict[str, Path]:
-        return self._upstream(ctx)
-
-    def _upstream(self, ctx: StageContext) -> dict[str, Path]:
         root = ctx.scene.output_path
         paths = {"fabric_h5": root / FABRIC_H5}
         if ctx.scene.laydown is not None:
@@ -273,13 +282,13 @@ class PermeabilityStage(Stage):
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
-        for key, p in self._upstream(ctx).items():
+        for key, p in self.needs(ctx).items():
             hashes[key] = file_hash(p) if p.is_file() else "missing"
         hashes["case_template"] = template_hash()
         return hashes
 
     def preflight(self, ctx: StageContext) -> None:
-        for key, p in self._upstream(ctx).items():
+        for key, p in self.needs(ctx).items():
             if not p.is_file():
                 raise StageError(f"permeability needs {p} ({key}): run the upstream stages first "
                                  "(fiberform run SCENE runs them in order)")  # fmt: skip
@@ -287,7 +296,7 @@ class PermeabilityStage(Stage):
             raise ConfigError("simpleFoam not found on PATH (install Debian's openfoam package)")
 
     def geometry(self, ctx: StageContext) -> PermeabilityGeometry:
-        paths = self._upstream(ctx)
+        paths = self.needs(ctx)
         img = read_fabric_image(paths["fabric_h5"])
         yarns = read_yarn_chains(paths["fabric_h5"])
         section = ctx.scene.fibers.cross_section if ctx.scene.fibers is not None else "circular"
