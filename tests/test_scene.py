@@ -279,7 +279,7 @@ UNIT_SUFFIXES = ("_m", "_s", "_kg", "_kg_m3", "_Pa", "_Pa_s", "_m_s", "_m_s2", "
 def _models() -> list[type]:
     from pydantic import BaseModel
 
-    from fiberform.scene import _model_in
+    from fiberform.scene.loader import _model_in
 
     out: list[type[BaseModel]] = [Scene]
     for info in Scene.model_fields.values():
@@ -290,7 +290,7 @@ def _models() -> list[type]:
 
 
 def test_every_field_has_a_description_and_dimensional_fields_a_unit_suffix() -> None:
-    from fiberform.scene import _model_in
+    from fiberform.scene.loader import _model_in
 
     for model in _models():
         assert model.model_config.get("extra") == "forbid", model
@@ -316,7 +316,7 @@ def _safe_validators(annotation: object, metadata: list[object]) -> bool:
     """Every ``str`` in the annotation sits in an Annotated with the identifier or path check."""
     from pydantic import AfterValidator
 
-    from fiberform.scene import _check_identifier, _check_relative_path
+    from fiberform.scene._fields import _check_identifier, _check_relative_path
 
     checks = (_check_identifier, _check_relative_path)
     if annotation is str:

@@ -1,0 +1,168 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Section of the ``laydown`` stage."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import model_validator
+
+from ._fields import _Section, choice, quantity, scene_problem
+from .common import ContactTerm
+
+
+class LaydownSection(_Section):
+    """Lay-down of the generated fibers on the fabric in the frozen flow (stage ``laydown``)."""
+
+    timestep_s: float = quantity("Fiber (DEM) time step", "s", default=1.0e-7, gt=0.0, le=1e-3)
+    max_time_s: float = quantity(
+        "Longest simulated time (the run ends earlier once settled)", "s", default=0.02,
+        gt=0.0, le=10.0,
+    )  # fmt: skip
+    check_interval_s: float = quantity(
+        "Simulated time between settle checks and sheet snapshots", "s", default=2.0e-4,
+        gt=0.0, le=1.0,
+    )  # fmt: skip
+    settle_speed_m_s: float = quantity(
+        "Settled when the largest node speed stays below this", "m/s", default=2.0e-3,
+        gt=0.0, le=10.0,
+    )  # fmt: skip
+    settle_speed_fraction: float | None = quantity(
+        "Settle threshold relative to the superficial velocity of the flow stage (replaces "
+        "settle_speed_m_s when given)", "1", default=None, gt=0.0, le=10.0,
+    )  # fmt: skip
+    settle_measure: Literal["node", "fiber"] = choice(
+        "Speed the settle criterion tests: node (largest node speed) or fiber (largest fiber "
+        "centre-of-mass speed; free fiber ends fluttering in the flow do not count)",
+        default="node",
+    )
+    settle_checks: int = quantity(
+        "Consecutive checks below settle_speed_m_s that end the run", "1", default=5, ge=1,
+        le=10000,
+    )  # fmt: skip
+    removal_height_m: float | None = quantity(
+        "Fibers with a node below this height are removed (absent: fabric lower side - 50 um)",
+        "m", default=None, ge=-10.0, le=10.0,
+    )  # fmt: skip
+    walls: Literal["fiber_yarns", "wall_fiber_dlvo", "wall_gran"] = choice(
+        "The four vertical side planes: fiber_yarns (planes of fix fiber/yarns, fiber/dlvo law, "
+        "sub-stepped), wall_fiber_dlvo (fix wall/fiber/dlvo of the contact styles) or wall_gran "
+        "(stock LIGGGHTS fix wall/gran, Hertz, frictionless; for comparisons)",
+        default="fiber_yarns",
+    )
+    terms: list[ContactTerm] = choice(
+        "Terms of the fiber/dlvo law against yarns and walls", default=["steric"]
+    )
+    friction_coefficient: float = quantity(
+        "Coulomb friction coefficient of fibers on yarns and side planes (fix fiber/yarns, "
+        "velocity-level stick/slip; 0: frictionless as the fiber/dlvo law)", "1", default=0.0,
+        ge=0.0, le=10.0,
+    )  # fmt: skip
+    contact_integrator: Literal["cvode", "substep"] = choice(
+        "Sub-integration of each fiber-yarn and fiber-wall contact: cvode (as pair_style "
+        "fiber/dlvo, the thesis' method) or substep (contact_substeps velocity-Verlet sub-steps)",
+        default="cvode",
+    )
+    contact_substeps: int = quantity(
+        "Velocity-Verlet sub-steps per step of each yarn/wall contact with contact_integrator "
+        "substep (rejected with cvode)", "1", default=100, ge=1, le=100000,
+    )  # fmt: skip
+    restart_interval_s: float = quantity(
+        "Simulated time between LIGGGHTS restart files of the lay-down (rounded to whole checks; "
+        "`fiberform laydown SCENE --resume` continues a killed run from the last one; 0: none)",
+        "s", default=5.0e-3, ge=0.0, le=1e3,
+    )  # fmt: skip
+    ranks: int = quantity(
+        "MPI ranks of the lay-down (> 1 needs yarn_contact newton; at most the machine's cores "
+        "unless --oversubscribe)", "1", default=1, ge=1, le=100000,
+    )  # fmt: skip
+    yarn_contact: Literal["newton", "averaged"] | None = choice(
+        "How yarns and the fiber_yarns side planes act on implicit fibers: newton (the law inside "
+        "each fiber's Newton solve, PD steric servo; docs/models/contact.md section 8) or averaged "
+        "(the contact point sub-integrated with contact_integrator, its impulse handed to the step). "
+        "Absent: newton with beam_integrator implicit, averaged with explicit",
+        default=None,
+    )
+    fiber_contact: Literal["newton", "averaged"] | None = choice(
+        "How fibers act on each other (contact section, pair_style fiber/dlvo): newton (fibers "
+        "that may touch during a step are solved together in one Newton solve with the law inside; "
+        "docs/models/contact.md section 9) or averaged (each contact point pair sub-integrated with "
+        "contact.integrator, the averaged force handed to each fiber's step). Absent: newton with "
+        "beam_integrator implicit, averaged with explicit",
+        default=None,
+    )
+    inertia_scale: float = quantity(
+        "fix fiber/beam inertia_scale (rotary inertia factor; speed option, 1 = real inertia)", "1",
+        default=1.0, gt=0.0, le=1e8,
+    )  # fmt: skip
+    stiffness_scale: float = quantity(
+        "fix fiber/beam stiffness_scale (EA, GA factor; speed option, 1 = real stiffness)", "1",
+        default=1.0, gt=0.0, le=1.0,
+    )  # fmt: skip
+    beam_integrator: Literal["implicit", "explicit"] = choice(
+        "fix fiber/beam integrator: implicit (generalized-alpha per fiber, steps set by accuracy; "
+        "thesis sec. 2.2) or explicit (velocity Verlet below the critical step; comparison)",
+        default="implicit",
+    )
+    rho_inf: float = quantity(
+        "fix fiber/beam rho_inf: numerical dissipation of the implicit integrator (spectral "
+        "radius at infinite frequency; 1 = none)", "1", default=0.5, ge=0.0, le=1.0,
+    )  # fmt: skip
+    newton_tolerance: float = quantity(
+        "fix fiber/beam newton_tol: implicit convergence tolerance (translations relative to the "
+        "section radius, rotations in rad)", "1", default=1.0e-8, gt=0.0, le=1e-2,
+    )  # fmt: skip
+    newton_max_iterations: int = quantity(
+        "fix fiber/beam newton_max: Newton iterations per implicit step before it is split",
+        "1", default=25, ge=1, le=1000,
+    )  # fmt: skip
+    damping_time_s: float = quantity(
+        "fix fiber/beam Kelvin-Voigt damping time", "s", default=0.0, ge=0.0, le=1.0
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> LaydownSection:
+        if self.timestep_s > self.check_interval_s:
+            raise scene_problem("check_interval_s", "must be at least timestep_s",
+                                self.check_interval_s)
+        if self.check_interval_s > self.max_time_s:
+            raise scene_problem("check_interval_s", "must not exceed max_time_s",
+                                self.check_interval_s)
+        if not self.terms:
+            raise scene_problem("terms", "needs at least one of vdw, es, steric", [])
+        if self.contact_integrator == "cvode" and "contact_substeps" in self.model_fields_set:
+            raise scene_problem("contact_substeps", "only used with contact_integrator substep",
+                                self.contact_substeps)
+        if self.ranks > 1 and self.yarn_contact_mode != "newton":
+            raise scene_problem("ranks", "more than one rank needs yarn_contact newton (the "
+                                "sub-integrated yarn contact needs both nodes of an element on one "
+                                "rank)", self.ranks)
+        if 0.0 < self.restart_interval_s < self.check_interval_s:
+            raise scene_problem("restart_interval_s", "must be 0 or at least check_interval_s",
+                                self.restart_interval_s)
+        if self.yarn_contact == "newton" and self.beam_integrator == "explicit":
+            raise scene_problem("yarn_contact", "newton needs beam_integrator implicit (allowed "
+                                "with explicit: averaged)", self.yarn_contact)
+        if self.fiber_contact == "newton" and self.beam_integrator == "explicit":
+            raise scene_problem("fiber_contact", "newton needs beam_integrator implicit (allowed "
+                                "with explicit: averaged)", self.fiber_contact)
+        if (self.yarn_contact_mode == "newton" and self.walls != "wall_fiber_dlvo"
+                and "contact_integrator" in self.model_fields_set):
+            raise scene_problem("contact_integrator", "only used with yarn_contact averaged or "
+                                "walls wall_fiber_dlvo (yarn_contact newton solves the contacts "
+                                "inside the fiber step)", self.contact_integrator)
+        return self
+
+    @property
+    def fiber_contact_mode(self) -> str:
+        """fiber_contact with its default resolved: newton (implicit) or averaged (explicit)."""
+        if self.fiber_contact is not None:
+            return self.fiber_contact
+        return "newton" if self.beam_integrator == "implicit" else "averaged"
+
+    @property
+    def yarn_contact_mode(self) -> str:
+        """yarn_contact with its default resolved: newton (implicit) or averaged (explicit)."""
+        if self.yarn_contact is not None:
+            return self.yarn_contact
+        return "newton" if self.beam_integrator == "implicit" else "averaged"
