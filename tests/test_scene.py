@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from fiberform.scene import Scene, field_table, load_scene
+from fiberform.scene import Scene, field_table, load_scene, parse_scene, read_scene_yaml
 
 GOOD = """\
 name: demo
@@ -127,7 +127,7 @@ BAD: dict[str, Bad] = {
     "ranks_too_many": Bad(replace("ranks: 1", "ranks: 65"), ("run.ranks", "1 <= x <= 64")),
     "missing_section": Bad(
         GOOD.split("run:")[0] + "demo_particles:" + GOOD.split("demo_particles:")[1],
-        ("run", "required"),
+        ("run", "required when demo_particles is present"),
     ),
     "missing_field": Bad(
         replace("  radius_m: 1.0e-3\n", ""), ("demo_particles.radius_m", "required")
@@ -344,3 +344,24 @@ def test_docs_field_table_is_current(repo_root: Path) -> None:
     assert field_table() in doc, (
         "regenerate the table: fiberform schema --update docs/stages/scene-format.md"
     )
+
+
+def test_domain_is_the_flow_box_when_absent() -> None:
+    """No domain section, a generated fabric and a flow: the domain is the flow box, from the
+    weave's own thickness (fabric_geometry.WeaveParams) plus the height above; for the default
+    weave and 0.8 mm that is the 3.437 mm the demo used to spell out (fabric top 2.637 mm)."""
+    from fiberform.fabric_geometry import WeaveParams
+
+    text = ("name: d\nfabric: {size_x_m: 1.0e-3, size_y_m: 2.0e-3}\n"
+            "flow: {height_above_fabric_m: 0.8e-3}\n")
+    scene = parse_scene(read_scene_yaml(text))
+    assert scene.domain is not None and scene.run is None
+    w = WeaveParams()
+    assert scene.domain.lo_m == [0.0, 0.0, 0.0]
+    assert scene.domain.hi_m == pytest.approx([1.0e-3, 2.0e-3, w.lower_side_z_m + w.thickness_m + 0.8e-3], rel=1e-12)
+    assert scene.domain.hi_m[2] == pytest.approx(3.437e-3, rel=1e-12)  # the demo's old explicit value
+    # an explicit domain is kept (and checked against the flow box by the flow stage)
+    explicit = parse_scene(read_scene_yaml(text + "domain: {lo_m: [0.0, 0.0, 0.0], hi_m: [1.0e-3, 2.0e-3, 5.0e-3]}\n"))
+    assert explicit.domain is not None and explicit.domain.hi_m[2] == 5.0e-3
+    # without a flow section there is no box to derive
+    assert parse_scene(read_scene_yaml("name: d\nfabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}\n")).domain is None

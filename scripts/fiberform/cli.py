@@ -46,9 +46,12 @@ def _summary(scene: Scene, source: str) -> list[str]:
         f"  seed        {scene.seed}",
         f"  sections    {', '.join(present)}"
         + (f" (absent: {', '.join(absent)})" if absent else ""),
-        f"  run         {r.steps} steps of {r.timestep_s:g} s = {r.steps * r.timestep_s:g} s, "
-        f"output every {r.output_every_steps} steps, {r.ranks} rank(s)",
     ]
+    if r is not None:
+        lines.append(f"  run         {r.steps} steps of {r.timestep_s:g} s = {r.steps * r.timestep_s:g} s, "
+                     f"output every {r.output_every_steps} steps, {r.ranks} rank(s)")
+    if scene.domain is not None:
+        lines.append(f"  domain      {scene.domain.lo_m} to {scene.domain.hi_m} m")
     f = scene.fibers
     if f is not None:
         amount = (

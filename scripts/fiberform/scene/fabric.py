@@ -7,6 +7,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
+from ..fabric_geometry import WeaveParams
 from ._fields import RelativePath, _Section, choice, quantity, scene_problem
 
 
@@ -69,6 +70,21 @@ class FabricSection(_Section):
         "Sampling step of the STL surface (coarser than the image keeps the file small)", "m",
         default=25e-6, ge=1e-6, le=2e-4,
     )  # fmt: skip
+
+    def weave(self) -> WeaveParams:
+        """The weave geometry of a generated fabric (:mod:`fiberform.fabric_geometry`)."""
+        return WeaveParams(
+            size_x_m=self.size_x_m, size_y_m=self.size_y_m, md_diameter_m=self.md_diameter_m,
+            cd_top_diameter_m=self.cd_top_diameter_m, cd_bottom_diameter_m=self.cd_bottom_diameter_m,
+            md_count_per_m=self.md_count_per_m, cd_count_per_m=self.cd_count_per_m, shed=self.shed,
+            shed_step=self.shed_step, bottom_shift=self.bottom_shift, clearance_m=self.clearance_m,
+            lower_side_z_m=self.lower_side_z_m, arc_step_deg=self.arc_step_deg,
+        )  # fmt: skip
+
+    @property
+    def top_z_m(self) -> float:
+        """Height of the generated fabric's top (lower side + weave thickness) [m]."""
+        return self.lower_side_z_m + self.weave().thickness_m
 
     @model_validator(mode="after")
     def _check(self) -> FabricSection:

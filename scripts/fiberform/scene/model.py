@@ -7,12 +7,12 @@ import hashlib
 import json
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import Field, ValidationError, model_validator
 
 from ..inputs import IDENTIFIER_PATTERN
-from ._fields import Identifier, RelativePath, _Section, choice, quantity
+from ._fields import Identifier, RelativePath, _Section, choice, quantity, scene_problem
 from .common import ContactSection, DomainSection, FluidSection, RunSection
 from .fibers import FiberGenerationSection, FibersSection
 from .particles import DemoParticlesSection
@@ -24,7 +24,9 @@ from .press import PressSection
 
 
 class Scene(_Section):
-    """A complete scene. Only ``name`` and ``run`` are required; other sections are optional."""
+    """A complete scene. Only ``name`` is required; each stage needs its own sections. Without a
+    ``domain`` section, a scene with a generated ``fabric`` and a ``flow`` gets the flow box as its
+    domain: [0, size_x] x [0, size_y] x [0, fabric top + flow.height_above_fabric_m]."""
 
     format_version: Literal[1] = choice("Scene format version", default=1)
     name: Identifier = Field(
@@ -52,7 +54,9 @@ class Scene(_Section):
         default=None, description="Fiber length/width/curvature distributions (stage generate)"
     )
     contact: ContactSection | None = Field(default=None, description="Fiber contact model")
-    run: RunSection = Field(description="Time stepping and parallel run")
+    run: RunSection | None = Field(
+        default=None, description="Time stepping and parallel run of the particle demo (stage demo-particles)"
+    )
     demo_particles: DemoParticlesSection | None = Field(
         default=None, description="Two-sphere collision demo"
     )
@@ -67,6 +71,31 @@ class Scene(_Section):
     press: PressSection | None = Field(
         default=None, description="Pressing of the laid-down sheet by a rigid plate (stage press)"
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _derive_domain(cls, data: Any) -> Any:
+        """domain absent, fabric generated, flow present: the flow box (flow.py checks an
+        explicit domain against the same box)."""
+        if not (isinstance(data, dict) and data.get("domain") is None
+                and isinstance(data.get("fabric"), dict) and isinstance(data.get("flow"), dict)):
+            return data
+        try:
+            fab = FabricSection.model_validate(data["fabric"])
+            flow = FlowSection.model_validate(data["flow"])
+        except ValidationError:
+            return data  # reported by the normal validation, field by field
+        if fab.source != "generate":
+            return data
+        box = {"lo_m": [0.0, 0.0, 0.0],
+               "hi_m": [fab.size_x_m, fab.size_y_m, fab.top_z_m + flow.height_above_fabric_m]}
+        return {**data, "domain": box}
+
+    @model_validator(mode="after")
+    def _check_run(self) -> Scene:
+        if self.demo_particles is not None and self.run is None:
+            raise scene_problem("run", "required when demo_particles is present (its time step and ranks)")
+        return self
 
     @property
     def output_path(self) -> Path:

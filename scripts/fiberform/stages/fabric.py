@@ -30,7 +30,6 @@ from ..fabric_geometry import (
     KIND_NAMES,
     FabricGeometryError,
     VoxelImage,
-    WeaveParams,
     Yarn,
     analytic_open_area,
     build_weave,
@@ -59,7 +58,6 @@ __all__ = [
     "make_fabric",
     "read_fabric_image",
     "read_yarns",
-    "weave_params",
     "write_voxel_file",
 ]
 
@@ -67,24 +65,6 @@ H5_NAME, STL_NAME, PNG_NAME = "fabric.h5", "fabric.stl", "fabric.png"
 
 #: Smallest accepted yarn-yarn clearance (m): touching crossings give about -1e-19.
 YARN_CLEARANCE_TOL_M = 1e-10
-
-
-def weave_params(sec: FabricSection) -> WeaveParams:
-    return WeaveParams(
-        size_x_m=sec.size_x_m,
-        size_y_m=sec.size_y_m,
-        md_diameter_m=sec.md_diameter_m,
-        cd_top_diameter_m=sec.cd_top_diameter_m,
-        cd_bottom_diameter_m=sec.cd_bottom_diameter_m,
-        md_count_per_m=sec.md_count_per_m,
-        cd_count_per_m=sec.cd_count_per_m,
-        shed=sec.shed,
-        shed_step=sec.shed_step,
-        bottom_shift=sec.bottom_shift,
-        clearance_m=sec.clearance_m,
-        lower_side_z_m=sec.lower_side_z_m,
-        arc_step_deg=sec.arc_step_deg,
-    )
 
 
 class FabricResult:
@@ -176,7 +156,7 @@ def make_fabric(sec: FabricSection, base_dir: Path | None = None) -> FabricResul
     props = res.props
     props["source"] = sec.source
     if sec.source == "generate":
-        p = weave_params(sec)
+        p = sec.weave()
         yarns = build_weave(p)
         chk = check_yarns(yarns)
         if chk.min_clearance_m < -YARN_CLEARANCE_TOL_M:
@@ -359,7 +339,7 @@ class FabricStage(Stage):
         problems = super().check_scene(scene)
         sec = scene.fabric
         if sec is not None and sec.source == "generate":
-            problems += [f"fabric: {p}" for p in weave_params(sec).problems()]
+            problems += [f"fabric: {p}" for p in sec.weave().problems()]
             if sec.voxel_size_m > 0.25 * min(sec.md_diameter_m, sec.cd_top_diameter_m):
                 problems.append(
                     f"fabric.voxel_size_m = {sec.voxel_size_m!r}: coarser than a quarter of the "

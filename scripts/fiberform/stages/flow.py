@@ -276,10 +276,7 @@ class FlowStage(Stage):
                 )
         if scene.domain is not None and fab.source == "generate":
             d = scene.domain
-            top = (
-                fab.lower_side_z_m + fab.md_diameter_m * 3 + fab.cd_top_diameter_m
-                + fab.cd_bottom_diameter_m + 4 * fab.clearance_m + flow.height_above_fabric_m
-            )  # fmt: skip
+            top = fab.top_z_m + flow.height_above_fabric_m
             want_lo, want_hi = [0.0, 0.0, 0.0], [fab.size_x_m, fab.size_y_m, top]
             for axis in range(3):
                 if not math.isclose(d.lo_m[axis], want_lo[axis], abs_tol=1e-12):

@@ -51,6 +51,9 @@ __all__ = [
 Array = npt.NDArray[np.float64]
 H5_NAME = "fibers.h5"
 INPUT_NAME = "in.fibers"
+#: time step written into in.fibers, which runs 0 steps (LIGGGHTS wants one); the lay-down and
+#: press set their own
+LOAD_TIMESTEP_S = 1.0e-7
 
 # ------------------------------------------------------------------------------------------------
 # shape (eq. 3.4-3.9) and frames
@@ -440,7 +443,7 @@ class Generate(Stage):
     requires = ("domain", "fibers")
     uses = ("seed", "domain", "fibers", "fiber_generation")
     products = (H5_NAME, DATA_NAME, NODES_NAME, INPUT_NAME)
-    code_version = 1
+    code_version = 2
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
@@ -493,7 +496,7 @@ class Generate(Stage):
         )
         write_fibers_liggghts(tmp[DATA_NAME], tmp[NODES_NAME], [gf.fiber for gf in fibers],
                               scene.domain.lo_m, scene.domain.hi_m, density_kg_m3=f.density_kg_m3)
-        tmp[INPUT_NAME].write_text(build_input(scene, scene.run.timestep_s))
+        tmp[INPUT_NAME].write_text(build_input(scene, LOAD_TIMESTEP_S))
 
         grp = h5.create_group("fibers")
         counts = np.array([gf.fiber.n for gf in fibers])

@@ -216,7 +216,7 @@ class DemoParticles(Stage):
     name = "demo-particles"
     summary = "two spheres collide head-on in fiberdem (pair_style test/harmonic); make demo"
     folder = "particles"
-    requires = ("demo_particles",)
+    requires = ("demo_particles", "run")
     uses = ("seed", "run", "demo_particles")
     products = ("particles.h5", "report.md")
 
