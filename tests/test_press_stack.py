@@ -3,20 +3,23 @@
 log-cabin stack of straight fibers: bending deflection against the continuous-beam closed form.
 
 The plate moves down by TRAVEL at 0.1 mm/s, stops (keyword stop) and holds for 200 steps; then P =
-plate force / crossings and the middle span's deflection are compared. Spring-back (the plate lifted
-again) is NOT asserted: at this step (1e-5 s) the released stack does not come to rest on its
-newton-mode steric contacts (layer 3 rebounds by up to 270 nm and touches the retreating plate, the
-deflection after release scatters by about 10 % of the loaded one; measured, see
-docs/stages/press.md, limits).
+plate force / crossings and the middle span's deflection are compared. Spring-back: the plate is
+lifted again by 2 TRAVEL and the stack left for 200 steps more, with gravity (without it nothing
+holds the free layer-3 fibers on the stack: they drift off with the speed of the spring-back).
+Steric only, the stack returns to its unloaded thickness within 1 % of the loaded compression; with
+van der Waals adhesion the residual is printed (and within 1 % too: docs/models/press.md). Before
+the contact forces were taken at the end of the step (issue 11) the released stack did not come to
+rest (layer 3 hopped by up to 340 nm, the deflection scattered by 1.7 x the loaded one): they were
+alpha-averaged in the implicit step (docs/models/contact.md section 10).
 
 Setup (SI; every expected number below is computed here from these inputs, never from a run):
 
 * fibers: solid circles r = 10 um, E = 10 GPa, G = 4 GPa (shear factor k = 5/6), 1500 kg/m3,
-  fix fiber/beam integrator implicit (default rho_inf 0.5), dt = 1e-5 s; no gravity (the weight of
-  one span, rho pi r^2 s g = 4.6e-9 N, is 0.2 % of the load per crossing); water at rest (fix
-  fiber/drag, zero flow): its drag at the plate speed (0.1 mm/s) is negligible against the
-  contact loads at rest, and it damps the stack's spring-back (without it the released layer 3
-  bounced up by 270 nm and hit the retreating plate, measured).
+  fix fiber/beam integrator implicit (default rho_inf 0.5, contact forces at the end of the step),
+  dt = 1e-5 s; no gravity for the deflection (the weight of one span, rho pi r^2 s g = 4.6e-9 N, is
+  0.2 % of the load per crossing), gravity and buoyancy for the spring-back runs; water at rest
+  (fix fiber/drag, zero flow): its drag at the plate speed (0.1 mm/s) is negligible against the
+  contact loads at rest; it damps the motion after the release.
 * layer 1: 4 fibers along x at y = j s (j = 0..3), s = 1 mm, centres r + h_R above the fixed bottom
   plane (fix wall/fiber/dlvo, implicit_force newton); layer 2 (test layer): 1 fiber along y at
   x = s/2, 3 spans of 20 elements each (nodes exactly at the crossings); layer 3: 3 fibers along x
@@ -140,7 +143,7 @@ def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict
         "communicate single vel yes", "processors 1 1 1", "read_data data.fib", f"neighbor {0.1 * R!r} bin",
         "neigh_modify delay 0", f"group clamp id {clamp}",
         f"fix beam all fiber/beam nodes nodes.fib E {E!r} G {G!r} density {RHO!r} shear_factor {KSH!r} clamp clamp",
-        # water at rest (drag damps the stack's spring-back; no gravity, see the docstring)
+        # water at rest (drag damps the motion after the release; gravity: see the docstring)
         "fix drag all fiber/drag flow uniform 0 0 0" + ("" if gravity else " gravity 0 0 0"),
         f"fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms {terms} implicit_force newton",
         plate(z_plate, -U_PLATE, TRAVEL + G0),
@@ -174,7 +177,11 @@ def runs(build_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str,
     if not (build_dir / "bin" / "fiberdem").is_file():
         pytest.skip("fiberdem not built")
     base = tmp_path_factory.mktemp("press_stack")
-    return {t: _run(base / t.replace(",", "_"), build_dir, t) for t in ("steric",)}
+    out = {t: _run(base / t.replace(",", "_"), build_dir, t) for t in ("steric",)}
+    # spring-back runs: with gravity (and buoyancy), steric only and with van der Waals adhesion
+    for t in ("steric", "vdw,steric"):
+        out[t + "+g"] = _run(base / (t.replace(",", "_") + "_g"), build_dir, t, gravity=True)
+    return out
 
 
 def _at(r: dict[str, np.ndarray], step: int) -> int:
@@ -196,3 +203,40 @@ def test_log_cabin_deflection_matches_continuous_beam(runs: dict[str, dict[str, 
     assert abs(delta / expected - 1) < 0.05, (
         f"deflection {delta:.4e} m vs P s^3/(192 E I) = {expected:.4e} m (P = {P:.3e} N); "
         f"compression per layer from the stack top {layers:.3e} m")
+
+
+def _springback(r: dict[str, np.ndarray]) -> tuple[float, float, float, float]:
+    """Loaded compression of the stack top (layer 3) and of the middle span, and what is left of
+    each over the last 100 steps after the release (m): top[0] is the unloaded stack."""
+    k = _at(r, int(r["hold_end"][0]))
+    hold, last = slice(k - 19, k + 1), slice(-20, None)
+    comp = float(r["top"][0] - np.mean(r["top"][hold]))
+    left = float(r["top"][0] - np.mean(r["top"][last]))
+    return comp, left, float(np.mean(r["delta"][hold])), float(np.mean(r["delta"][last]))
+
+
+def test_spring_back_without_adhesion(runs: dict[str, dict[str, np.ndarray]]) -> None:
+    r = runs["steric+g"]
+    comp, left, d_load, d_left = _springback(r)
+    assert comp > 0.5 * TRAVEL, comp  # the plate did compress the stack
+    # back to the unloaded thickness within 1 % of the loaded compression, and at rest there
+    assert abs(left) < 0.01 * comp, (left, comp)
+    assert float(np.ptp(r["top"][-20:])) < 0.01 * comp, np.ptp(r["top"][-20:])
+    assert abs(d_left) < 0.01 * d_load, (d_left, d_load)
+
+
+def test_spring_back_with_adhesion_is_measured(runs: dict[str, dict[str, np.ndarray]]) -> None:
+    r = runs["vdw,steric+g"]
+    comp, left, d_load, d_left = _springback(r)
+    s_comp, s_left, _, _ = _springback(runs["steric+g"])
+    print(f"spring-back: steric only {s_left * 1e9:+.3f} nm of {s_comp * 1e9:.1f} nm left; "
+          f"with vdW {left * 1e9:+.3f} nm of {comp * 1e9:.1f} nm left, middle span "
+          f"{d_left * 1e9:+.3f} of {d_load * 1e9:.1f} nm")
+    assert comp > 0.5 * TRAVEL, comp
+    assert float(np.ptp(r["top"][-20:])) < 0.01 * comp, np.ptp(r["top"][-20:])  # at rest
+    # Measured (1e-5 s): 0.30 nm left of 120.3 nm (steric only 0.18 nm, the stack's sag under its
+    # weight). The adhesion adds about 0.1 nm: its wells compress the stack's contact levels; a
+    # frictionless log-cabin has nothing that holds it bent (the <= 1.8 nm of adhesion-held bending
+    # estimated for issue 11 does not occur). So it springs back within 1 % as well:
+    assert abs(left) < 0.01 * comp, (left, comp)
+    assert abs(d_left) < 0.01 * d_load, (d_left, d_load)

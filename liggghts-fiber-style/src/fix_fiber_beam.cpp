@@ -146,6 +146,12 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       rho_inf_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, true);
       if (rho_inf_ > 1.0) error->all(FLERR, "fix fiber/beam: keyword 'rho_inf' must be in [0, 1]");
       iarg += 2;
+    } else if (std::strcmp(kw, "contact_weighting") == 0) {
+      need(iarg, 1, kw);
+      if (std::strcmp(arg[iarg + 1], "end") == 0) contact_at_end_ = true;
+      else if (std::strcmp(arg[iarg + 1], "alpha") == 0) contact_at_end_ = false;
+      else error->all(FLERR, "fix fiber/beam: keyword 'contact_weighting' takes 'end' or 'alpha'");
+      iarg += 2;
     } else if (std::strcmp(kw, "newton_tol") == 0) {
       need(iarg, 1, kw);
       newton_tol_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
@@ -916,6 +922,7 @@ void FixFiberBeam::implicit_step() {
   opt.max_split = max_split_;
   opt.t_damp = t_damp_;
   opt.tau_drag = tau_drag_;
+  opt.contact_at_end = contact_at_end_;
   if (!stepper_) stepper_ = std::make_unique<rod::Stepper>();
   rod::Stepper &stepper = *stepper_;
   std::vector<rod::Node> nodes, fnodes;

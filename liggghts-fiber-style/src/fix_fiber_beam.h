@@ -166,6 +166,7 @@ class FixFiberBeam : public Fix {
   bool implicit_ = true;
   double rho_inf_ = 0.5, newton_tol_ = 1e-8;
   int newton_max_ = 25, max_split_ = 8;
+  bool contact_at_end_ = true;  // contact forces at the end of the step only (rod::contact_force_weight)
   int clamp_groupbit_ = 0;
   std::unique_ptr<fiberform::physics::rod::Stepper> stepper_;  // implicit solver workspace
   std::vector<fiberform::physics::rod::NodeForceModel *> models_;  // not owned

@@ -209,6 +209,81 @@ void test_cantilever_statics() {
               steps, static_cast<double>(iters) / steps, nodes[ne].x.y, want);
 }
 
+// A stiff unilateral contact spring as a NodeForceModel, saturating like the steric servo S1
+// (physics/steric.h, without its damping): F = k c tanh(-z / c) upwards for z < 0.
+class UnilateralSpring : public rod::NodeForceModel {
+ public:
+  UnilateralSpring(double k, double c) : k_(k), c_(c) {}
+  void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
+    const double z = nodes[0].x.z;
+    if (z >= 0.0) return;
+    F[0].z += k_ * c_ * std::tanh(-z / c_);
+    if (J) J->Kd[8] += -k_ / std::pow(std::cosh(z / c_), 2);
+  }
+
+ private:
+  double k_, c_;
+};
+
+// Contact force weighting (rod::contact_force_weight, docs/models/contact.md section 10): one node
+// of a log-cabin stack's top layer (tests/test_press_stack.py: 2.36e-10 kg) on a stiff unilateral
+// spring of the steric servo's stiffness 2 m / t_R^2 (t_R = 1e-7 s, omega h = 141 at h = 1e-5 s),
+// saturating at 2 nm (no damping: the servo's PD damping is left out to expose the scheme):
+// * statics: pressed by a load P it rests with the spring force = P (the weighting keeps statics);
+// * impact at v0 = 0.1 mm/s, 5 steps above the spring: the rebound speed. Alpha-averaged like the
+//   internal forces (contact_at_end = false, printed), the force of the step that caught the node
+//   kept pushing in the next one, after the contact had opened: rebound 2.37 v0 at rho_inf 0.5,
+//   2.91 v0 at 0.8 (and at 0.8 the node pressed by P did not come to rest). Taken at the end of
+//   the step: 1.25 v0 at 0.5 and 0.8, 1.00 at 0 (the remaining gain is the Newmark relation of
+//   displacement and velocity, gamma / beta; in fiberdem the PD damping of S1 removes it).
+void test_contact_weighting() {
+  // a layer-3 node of the log-cabin stack (tests/test_press_stack.py) on the servo's stiffness 2 m / t_R^2
+  const double m = 2.36e-10, h = 1e-5, t_R = 1e-7, k = 2.0 * m / (t_R * t_R), c = 2e-9, P = 0.5 * k * c, v0 = 1e-4;
+  for (bool at_end : {true, false}) {
+    for (double rho : {0.0, 0.5, 0.8}) {
+      const rod::GenAlpha g = rod::gen_alpha(rho);
+      rod::Options opt;
+      opt.tol = 1e-12;
+      opt.contact_at_end = at_end;
+      std::vector<rod::Element> none;
+      UnilateralSpring spring(k, c);
+      std::vector<rod::NodeForceModel *> models{&spring};
+      // statics
+      std::vector<rod::Node> nodes{free_node(m, {1e-18, 1e-18, 1e-18})};
+      nodes[0].x = {0, 0, -P / k};
+      nodes[0].F = {0, 0, -P};
+      rod::Stepper st;
+      st.initialise(nodes, none, opt);
+      bool ok = true;
+      for (int s = 0; s < 200; ++s) ok = ok && st.step(nodes, none, h, g, opt, &models).ok;
+      const double rest_v = std::fabs(nodes[0].v.z), rest_f = nodes[0].Fmodel.z;
+      // impact: released 5 v0 h above the spring, moving down at v0
+      nodes = {free_node(m, {1e-18, 1e-18, 1e-18})};
+      nodes[0].x = {0, 0, 5.0 * v0 * h};
+      nodes[0].v = {0, 0, -v0};
+      st.initialise(nodes, none, opt);
+      double vmax = 0.0;
+      for (int s = 0; s < 30; ++s) {
+        ok = ok && st.step(nodes, none, h, g, opt, &models).ok;
+        vmax = std::max(vmax, nodes[0].v.z);
+      }
+      char what[160];
+      std::snprintf(what, sizeof what, "contact weighting (rho_inf %.1f, %s): steps converge", rho, at_end ? "end" : "alpha");
+      expect(ok, what);
+      std::printf("contact weighting rho_inf %.1f, contact forces %s: at rest |v| %.1e m/s, spring force / load "
+                  "%.9f; impact: rebound speed / v0 %.3f\n",
+                  rho, at_end ? "at the end of the step" : "alpha-averaged", rest_v, rest_f / P, vmax / v0);
+      if (!at_end) continue;  // the former weighting: printed only
+      std::snprintf(what, sizeof what, "contact weighting (rho_inf %.1f): at rest under the load", rho);
+      expect(rest_v < 1e-9 && std::fabs(rest_f / P - 1.0) < 1e-6, what, rest_f / P, 1.0);
+      std::snprintf(what, sizeof what, "contact weighting (rho_inf %.1f): rebound at most 1.25 v0 (alpha-averaged: 2.4 v0)", rho);
+      expect(vmax <= (rho > 0.0 ? 1.25 : 1.0) * v0 * (1.0 + 1e-3), what, vmax / v0, rho > 0.0 ? 1.25 : 1.0);
+    }
+  }
+  expect(std::fabs(rod::contact_force_weight(rod::gen_alpha(0.5)) - 1.5) < 1e-15, "contact weight 1/(1 - af) at rho_inf 0.5",
+         rod::contact_force_weight(rod::gen_alpha(0.5)), 1.5);
+}
+
 }  // namespace
 
 int main() {
@@ -217,5 +292,6 @@ int main() {
   test_free_node();
   test_spectral_radius();
   test_cantilever_statics();
+  test_contact_weighting();
   return fiberform::check::finish("test_implicit_rod");
 }
