@@ -53,16 +53,17 @@ def stage_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def fabric_image():  # type: ignore[no-untyped-def]
+def fabric_piece():  # type: ignore[no-untyped-def]
+    """The 1 x 1 mm default fabric: (voxel image, yarns as (centre line, radius))."""
     sec = FabricSection(size_x_m=1.0e-3, size_y_m=1.0e-3, voxel_size_m=10.0e-6)
     res = make_fabric(sec)
-    assert res.image is not None
-    return res.image
+    assert res.image is not None and res.yarns is not None
+    return res.image, [(y.points, y.radius) for y in res.yarns]
 
 
-def _setup(img, delta_p: float, ranks: int = 1) -> FlowSetup:  # type: ignore[no-untyped-def]
+def _setup(fabric, delta_p: float, ranks: int = 1) -> FlowSetup:  # type: ignore[no-untyped-def]
     return FlowSetup.from_scene(
-        img, FlowSection(cell_size_m=CELL, delta_p_Pa=delta_p, ranks=ranks), FluidSection()
+        fabric[0], FlowSection(cell_size_m=CELL, delta_p_Pa=delta_p, ranks=ranks), FluidSection()
     )
 
 
@@ -97,11 +98,12 @@ def test_stage_products_and_mass_conservation(stage_run: Path) -> None:
     assert np.array_equal(Ubin, U)
 
 
-def test_superficial_velocity_vs_pressure_drop(fabric_image, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_superficial_velocity_vs_pressure_drop(fabric_piece, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     drops = [0.25, 0.5, 1.0]
     rows = []
     for dp in drops:
-        res = run_flow_case(_setup(fabric_image, dp), fabric_image, tmp_path / f"dp{dp:g}")
+        res = run_flow_case(_setup(fabric_piece, dp), fabric_piece[0], tmp_path / f"dp{dp:g}",
+                            yarns=fabric_piece[1])  # fmt: skip
         assert res.converged
         assert res.imbalance < 0.005
         rows.append((dp, res.q_bottom_m3_s / 1e-6, res.iterations))
@@ -116,10 +118,11 @@ def test_superficial_velocity_vs_pressure_drop(fabric_image, tmp_path: Path) -> 
     assert perm.max() / perm.min() - 1 < 0.02, perm
 
 
-def test_two_ranks_match_serial(fabric_image, stage_run: Path, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_two_ranks_match_serial(fabric_piece, stage_run: Path, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     if (os.cpu_count() or 1) < 2:
         pytest.skip("needs 2 cores")
-    res = run_flow_case(_setup(fabric_image, 100.0, ranks=2), fabric_image, tmp_path / "par")
+    res = run_flow_case(_setup(fabric_piece, 100.0, ranks=2), fabric_piece[0], tmp_path / "par",
+                        yarns=fabric_piece[1])  # fmt: skip
     assert (tmp_path / "par" / "log.decomposePar").is_file()
     with h5py.File(stage_run / "flow" / "flow.h5") as f:
         q_serial = float(f["flow_rate/bottom"][()])

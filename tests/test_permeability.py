@@ -2,14 +2,16 @@
 """Tests of the ``permeability`` stage (issue 12).
 
 Quick (no OpenFOAM): the solid fraction of a cylinder sampled on the lattice against pi a^2, the
-flow-rate convergence criterion against a sinusoid, the product paths of the readers against the
-producing stages, bad ``permeability`` sections (exit status 2 naming the field, nothing written).
+flow-rate convergence criterion against a sinusoid, the Tomadakis-Sotirchos law against a value
+evaluated by hand, the product paths of the readers against the producing stages, bad
+``permeability`` sections (exit status 2 naming the field, nothing written).
 
 System (stock simpleFoam): a square array of cylinders in transverse Stokes flow through the same
 box case, capsule rasterisation and cell removal as the stage; the permeability k / a^2 measured
 between two planes one period apart inside the array against the closed form of Drummond & Tahir
-(1984) at solid fractions 0.05 and 0.1, with mass conservation; and the stage end to end on a
-coarse bare fabric through the CLI.
+(1984) at solid fractions 0.05 and 0.1, with mass conservation; the stage end to end on a
+coarse bare fabric through the CLI; Darcy consistency: the bare fabric's k from water through the
+flow stage equals k from air through this stage (one solid, low Re) within 1 %.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import pytest
 from fiberform.openfoam_case import BoxSetup, make_lattice, run_case
 from fiberform.porous_media import (
     CFM_M_S, capsule_fraction, chain_fraction, flat_thickness_dir, flow_rate_convergence,
-    forchheimer_fit, hydraulic_radius, line_fraction, subgrid_resistance,
+    forchheimer_fit, hydraulic_radius, line_fraction, subgrid_resistance, tomadakis_sotirchos,
 )  # fmt: skip
 from fiberform.products import FABRIC_H5, FIBERS_H5, LAYDOWN_H5, Chain, read_sheet_chains
 
@@ -221,6 +223,19 @@ def test_convergence_criterion_on_a_sinusoid() -> None:
     assert not flow_rate_convergence(q, window=500, tolerance=0.005).converged
     # fewer iterations than the window: the second half of the history is used
     assert flow_rate_convergence(q[:300], window=500, tolerance=0.1).window == 150
+
+
+def test_tomadakis_sotirchos_2d_through_plane() -> None:
+    """Tomadakis & Sotirchos (1993) for 2D random fiber structures, flow perpendicular to the
+    fiber planes (percolation porosity 0.11, exponent 0.785), evaluated by hand at porosity 0.8:
+    0.8 * 0.69^2.785 / (8 (ln 0.8)^2 0.89^0.785 (1.785 * 0.8 - 0.11)^2) = 2.00831 * 0.355776 /
+    (0.912578 * 1.737124) = 0.45074; no flow at and below the percolation threshold."""
+    a = 10e-6
+    assert float(tomadakis_sotirchos(np.array(0.2), a)) == pytest.approx(0.45074 * a**2, rel=1e-4)
+    assert float(tomadakis_sotirchos(np.array(0.89), a)) == 0.0
+    assert float(tomadakis_sotirchos(np.array(0.95), a)) == 0.0
+    k = tomadakis_sotirchos(np.array([0.05, 0.1, 0.2, 0.3]), a)
+    assert np.all(np.diff(k) < 0)
 
 
 def test_reader_paths_match_the_stages() -> None:
@@ -630,3 +645,71 @@ def test_forchheimer_k_against_creeping_flow(tmp_path: Path) -> None:
     print(f"\nbare fabric: k_D of the fit through 2 and 5 Pa {k['fit']:.4g} m^2, Darcy k at 0.05 Pa "
           f"{k['darcy']:.4g} m^2 ({k['fit'] / k['darcy'] - 1:+.3f})")
     assert k["fit"] / k["darcy"] == pytest.approx(1.0, rel=0.05)
+
+
+# ---- system: Darcy consistency of the two stages ---------------------------------------------
+
+DARCY = """name: darcytest
+run: {timestep_s: 1.0e-6, duration_s: 1.0e-3}
+fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3, voxel_size_m: 10.0e-6}
+fluid: {density_kg_m3: 998.2, viscosity_Pa_s: 1.0e-3}
+flow: {cell_size_m: 5.5e-5, delta_p_Pa: 0.05, height_above_fabric_m: 0.5e-3,
+       max_cell_height_m: 0.22e-3, max_iterations: 2000, residual_tolerance: 1.0e-8}
+permeability: {cells_across_fiber: 2, pressure_drop_Pa: 0.02, height_above_m: 0.5e-3,
+               max_cell_height_m: 0.22e-3, max_iterations: 2000, residual_tolerance: 1.0e-8,
+               convergence_window: 200, convergence_tolerance: 1.0e-4}
+"""
+
+
+@pytest.mark.system
+@needs_openfoam
+def test_darcy_water_flow_stage_vs_air_permeability_stage(tmp_path: Path) -> None:
+    """The bare fabric's Darcy permeability k = mu u_s L / delta_p is a property of its geometry:
+    water through the flow stage (998.2 kg/m^3, 1e-3 Pa s, 0.05 Pa) and air through the
+    permeability stage (1.204 kg/m^3, 1.81e-5 Pa s, 0.02 Pa), both at pore Reynolds numbers far
+    below 1, give one k within 1 %; both stages build one solid (the same cells removed: 55 um
+    cells, two across the 110 um warp) and conserve mass within 0.5 %."""
+    (tmp_path / "s.yaml").write_text(DARCY)
+    env = dict(os.environ, WM_PROJECT_DIR=os.environ.get("WM_PROJECT_DIR", "/usr/share/openfoam"))
+    for stage in ("fabric", "flow", "permeability"):
+        r = subprocess.run([sys.executable, "-m", "fiberform", stage, "s.yaml"], cwd=tmp_path,
+                           env=env, capture_output=True, text=True, errors="replace", timeout=900,
+                           check=False)  # fmt: skip
+        assert r.returncode == 0, r.stdout + r.stderr
+    root = tmp_path / "runs" / "darcytest"
+    d_warp = 0.11e-3  # the thinnest yarn (fabric.md_diameter_m default)
+    with h5py.File(root / "flow" / "flow.h5") as f:
+        sv = f["solver"].attrs
+        assert bool(sv["converged"])
+        L_w = float(sv["setup_fabric_hi_z_m"]) - float(sv["setup_fabric_lo_z_m"])
+        u_w = float(f["flow_rate/bottom"][()]) / 1e-6
+        imb_w = abs(float(f["flow_rate/top"][()]) / float(f["flow_rate/bottom"][()]) - 1)
+        fluid_w = f["lattice/fluid"][...]
+        umax_w = float(np.max(np.linalg.norm(f["lattice/U"][...], axis=-1)))
+    with h5py.File(root / "permeability-fabric" / "permeability.h5") as f:
+        r_ = f["result"]
+        assert bool(r_.attrs["converged"])
+        assert float(r_["window_relative_range"][()]) <= 1e-4
+        L_a = float(r_["layer_thickness"][()])
+        u_a = float(r_["superficial_velocity"][()])
+        imb_a = abs(float(r_["q_top"][()]) / float(r_["q_bottom"][()]) - 1)
+        k_stage = float(r_["darcy_k"][()])
+        fluid_a = f["lattice/fluid"][...]
+        umax_a = float(np.max(np.linalg.norm(f["lattice/U"][...].astype(np.float64), axis=-1)))
+    # one geometry: the same lattice, the same cells removed, the same layer
+    assert fluid_w.shape == fluid_a.shape
+    assert np.array_equal(fluid_w, fluid_a), f"{int(np.sum(fluid_w != fluid_a))} cells differ"
+    assert L_w == pytest.approx(L_a, rel=1e-12)
+    # low Reynolds number: superficial and largest cell velocity over the warp diameter
+    re_w, re_a = 998.2 * u_w * d_warp / 1e-3, 1.204 * u_a * d_warp / 1.81e-5
+    re_pore_w, re_pore_a = 998.2 * umax_w * d_warp / 1e-3, 1.204 * umax_a * d_warp / 1.81e-5
+    k_w = 1e-3 * u_w * L_w / 0.05
+    k_a = 1.81e-5 * u_a * L_a / 0.02
+    print(f"\nDarcy k of the bare fabric: water (flow stage) {k_w:.6e} m^2, air (permeability "
+          f"stage) {k_a:.6e} m^2, ratio - 1 {k_w / k_a - 1:+.2e}; Re superficial {re_w:.2e}, "
+          f"{re_a:.2e}, largest cell velocity {re_pore_w:.2e}, {re_pore_a:.2e}; imbalance "
+          f"{imb_w:.1e}, {imb_a:.1e}; {int(fluid_w.sum())} fluid cells")
+    assert max(re_pore_w, re_pore_a) < 0.1
+    assert imb_w < 0.005 and imb_a < 0.005
+    assert k_stage == pytest.approx(k_a, rel=1e-12)
+    assert k_w == pytest.approx(k_a, rel=0.01)

@@ -47,7 +47,8 @@ def main() -> int:
     t0 = time.monotonic()
     fab = make_fabric(FabricSection(size_x_m=1.0e-3, size_y_m=1.0e-3, voxel_size_m=5e-6))
     img = fab.image
-    assert img is not None
+    assert img is not None and fab.yarns is not None
+    yarns = [(y.points, y.radius) for y in fab.yarns]
     t_fabric = time.monotonic() - t0
     rows = []
     with tempfile.TemporaryDirectory(prefix="fiberform-bench-flow-") as tmp:
@@ -58,7 +59,8 @@ def main() -> int:
             walls, solver_walls, res = [], [], None
             for r in range(args.repeats):
                 t = time.monotonic()
-                res = run_flow_case(s, img, Path(tmp) / f"h{h:g}_{r}", show_progress=False)
+                res = run_flow_case(s, img, Path(tmp) / f"h{h:g}_{r}", yarns=yarns,
+                                    show_progress=False)  # fmt: skip
                 walls.append(time.monotonic() - t)
                 solver_walls.append(res.wall_times_s["simpleFoam"])
             assert res is not None

@@ -11,7 +11,9 @@ velocity there, no-slip on the solid (wall patch ``yarns``). Solver: stock ``sim
 Mesh: ``blockMesh`` builds a box of three blocks stacked in z; the zone has cubic cells of
 ``cell_size_m``, the blocks above and below are graded geometrically up to ``max_cell_height_m``. The
 caller supplies the solid volume fraction of each zone cell (a :data:`SolidFraction` callback);
-``topoSet`` selects the cells with fraction < 1/2 that are face-connected to the top and
+the cells to remove are those with fraction >= 1/2 or, with ``preserve_volume`` (both stages), the
+ones :func:`volume_preserving` picks; ``topoSet`` selects the others that are face-connected to the
+top and
 ``subsetMesh`` keeps only those, turning the exposed faces into the wall patch ``yarns`` (a
 "staircase" wall; the resolution trade is measured in docs/bench/flow.md and
 docs/stages/permeability.md).
@@ -35,7 +37,6 @@ import numpy.typing as npt
 
 from ._versions import repo_root
 from .errors import StageError
-from .fabric_geometry import VoxelImage
 from .provenance import file_hash, text_hash
 from .runner import openfoam_progress, run
 
@@ -52,7 +53,6 @@ __all__ = [
     "template_hash",
     "volume_preserving",
     "plot_section",
-    "voxel_fraction",
     "write_solver_record",
 ]
 
@@ -360,26 +360,6 @@ def _write_porous_zones(case: Path, d_cells: FloatArray) -> bool:
         for k, v in options.items():
             o[k] = v
     return True
-
-
-def voxel_fraction(img: VoxelImage, s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float32]:
-    """Solid volume fraction of each zone cell from the voxels of ``img`` whose centres it holds.
-    Shape (nx, ny, n_fabric)."""
-    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
-    hz = (s.fabric_hi_z_m - s.fabric_lo_z_m) / lat.n_fabric
-    ix = np.clip(np.floor((img.centres(0) - 0.0) / hx).astype(np.int64), 0, lat.nx - 1)
-    iy = np.clip(np.floor((img.centres(1) - 0.0) / hy).astype(np.int64), 0, lat.ny - 1)
-    iz = np.floor((img.centres(2) - s.fabric_lo_z_m) / hz).astype(np.int64)
-    keep = (iz >= 0) & (iz < lat.n_fabric)  # voxels outside the zone (a taller zone) drop out
-    solid = img.solid[:, :, keep]
-    iz = iz[keep]
-    flat = (ix[:, None, None] * lat.ny + iy[None, :, None]) * lat.n_fabric + iz[None, None, :]
-    n = lat.nx * lat.ny * lat.n_fabric
-    total = np.bincount(flat.ravel(), minlength=n).astype(np.float64)
-    sol = np.bincount(flat.ravel(), weights=solid.ravel().astype(np.float64), minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        frac = np.where(total > 0, sol / np.maximum(total, 1), 0.0)
-    return frac.reshape(lat.nx, lat.ny, lat.n_fabric).astype(np.float32)
 
 
 def volume_preserving(frac: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:

@@ -391,3 +391,27 @@ def subgrid_resistance(phi: npt.NDArray[np.float32], a: float, law: str) -> Floa
     p = np.clip(np.asarray(phi, dtype=np.float64), SUBGRID_PHI_MIN, SUBGRID_PHI_MAX)
     d = 1.0 / SUBGRID_LAWS[law](p, a)
     return np.where(np.asarray(phi) >= SUBGRID_PHI_MIN, d, 0.0)
+
+
+#: Tomadakis & Sotirchos (1993) constants for 2D random fiber structures (fibers lying in parallel
+#: planes, random in-plane directions, freely overlapping): percolation threshold porosity and
+#: exponent for flow perpendicular to the fiber planes (through the sheet); 0.521 is the exponent
+#: for flow parallel to the planes. Tomadakis & Robertson (2005), J. Compos. Mater. 39, 163-188,
+#: apply the 1993 constants to the viscous permeability.
+TS_2D_PERCOLATION_POROSITY = 0.11
+TS_2D_ALPHA_THROUGH_PLANE = 0.785
+
+
+def tomadakis_sotirchos(phi: FloatArray, a: float, eps_p: float = TS_2D_PERCOLATION_POROSITY,
+                        alpha: float = TS_2D_ALPHA_THROUGH_PLANE) -> FloatArray:  # fmt: skip
+    """Permeability [m^2] of random fiber structures of radius ``a`` at fiber volume fraction phi
+    (porosity eps = 1 - phi): Tomadakis & Sotirchos (1993), AIChE J. 39, 397-412; Tomadakis &
+    Robertson (2005), k / a^2 = eps (eps - eps_p)^(alpha + 2) / (8 (ln eps)^2 (1 - eps_p)^alpha
+    ((alpha + 1) eps - eps_p)^2); zero at and below the percolation threshold eps_p. Defaults: 2D
+    random structures, flow through the fiber planes."""
+    eps = 1.0 - np.asarray(phi, dtype=np.float64)
+    open_ = np.maximum(eps - eps_p, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = (eps * open_ ** (alpha + 2) / (8.0 * np.log(eps) ** 2 * (1.0 - eps_p) ** alpha
+                                           * ((alpha + 1) * eps - eps_p) ** 2))  # fmt: skip
+    return np.asarray(a * a * np.where(open_ > 0, k, 0.0))

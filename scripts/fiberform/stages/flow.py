@@ -9,14 +9,18 @@ ranks through ``decomposePar``.
 
 Mesh: ``blockMesh`` builds a box of three blocks stacked in z; the fabric zone has cubic cells of
 ``flow.cell_size_m`` on the lattice of the voxel image's box, the blocks above and below are graded
-geometrically up to ``max_cell_height_m``. Each fabric-zone cell gets the solid volume fraction of
-the fabric voxels it holds (field ``solid``); ``topoSet`` selects the cells with fraction < 1/2
-that are face-connected to the top, and ``subsetMesh`` keeps only those, turning the exposed faces
-into the wall patch ``yarns``. This "staircase" mesh is what the voxel image gives directly and needs
-no surface: the trade is resolution (a yarn of diameter d spans d / cell_size cells; the openings
-between yarns, about 0.09 mm in the default fabric, need at least 3-4 cells for the flow rate to
-converge to a few percent; see docs/bench/flow.md). snappyHexMesh on ``fabric.stl`` would give
-body-fitted cells, at several times the meshing cost and with a less predictable cell count.
+geometrically up to ``max_cell_height_m``. The solid is the permeability stage's (one solid for
+both, so that water and air give one Darcy permeability; tests/test_permeability.py): each
+fabric-zone cell gets the fraction of its ``SUBSAMPLES``^3 sample points inside a yarn (capsule
+chains of ``fabric.h5`` ``/yarns``; an imported fabric: its voxel image), the cells with the largest
+fractions are removed until the removed volume equals the sampled yarn volume
+(:func:`fiberform.openfoam_case.volume_preserving`), ``topoSet`` keeps the rest that is
+face-connected to the top and ``subsetMesh`` turns the exposed faces into the wall patch ``yarns``.
+This "staircase" mesh needs no surface: the trade is resolution (a yarn of diameter d spans
+d / cell_size cells; the openings between yarns, about 0.09 mm in the default fabric, need at least
+3-4 cells for the flow rate to converge to a few percent; see docs/bench/flow.md). snappyHexMesh on
+``fabric.stl`` would give body-fitted cells, at several times the meshing cost and with a less
+predictable cell count.
 
 Products in ``<output_dir>/flow/``: ``flow.h5`` (the regular sampling grid and the raw lattice
 values, flow rates, solver record), ``flow.grid`` (binary companion of the grid velocity for the
@@ -31,7 +35,7 @@ from __future__ import annotations
 import math
 import struct
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,10 +46,11 @@ import numpy.typing as npt
 from ..errors import StageError
 from ..fabric_geometry import VoxelImage
 from ..openfoam_case import (
-    BoxSetup, CaseResult, plot_section, run_case, template_hash, voxel_fraction,
+    BoxSetup, CaseResult, Lattice, SolidFraction, plot_section, run_case, template_hash,
     write_solver_record,
 )  # fmt: skip
-from ..products import FABRIC_H5, read_fabric_image
+from ..porous_media import capsule_fraction, image_fraction
+from ..products import FABRIC_H5, read_fabric_image, read_yarn_chains
 from ..provenance import file_hash, write_dataset
 from ..scene import FlowSection, FluidSection, Scene
 from ._stage import Stage, StageContext
@@ -54,6 +59,7 @@ __all__ = [
     "FlowResult",
     "FlowSetup",
     "FlowStage",
+    "fabric_solid",
     "read_flow_grid",
     "run_flow_case",
     "write_flow_grid",
@@ -93,17 +99,40 @@ class FlowSetup(BoxSetup):
         )
 
 
+#: Sample points per cell edge for the yarn fraction of a cell (the permeability stage's default
+#: ``permeability.subsamples``, so that both stages remove the same cells).
+SUBSAMPLES = 4
+
+
+def fabric_solid(img: VoxelImage, yarns: Sequence[tuple[FloatArray, float]]) -> SolidFraction:
+    """Solid fraction of the zone cells of the bare fabric, computed as the permeability stage
+    does: the yarns ``(centre line (m, 3) [m], radius [m])`` sampled at SUBSAMPLES^3 points per
+    cell (:func:`fiberform.porous_media.capsule_fraction`) or, with no yarns (imported fabric), the
+    voxel image ``img`` at the same points (:func:`fiberform.porous_media.image_fraction`)."""
+    chains = [(np.asarray(p, dtype=np.float64), float(r)) for p, r in yarns]
+
+    def frac(s: BoxSetup, lat: Lattice) -> npt.NDArray[np.float32]:
+        if chains:
+            return capsule_fraction(chains, s, lat, SUBSAMPLES)
+        return image_fraction(img, s, lat, SUBSAMPLES)
+
+    return frac
+
+
 def run_flow_case(
     s: BoxSetup,
     img: VoxelImage,
     work: Path,
     *,
+    yarns: Sequence[tuple[FloatArray, float]] = (),
     oversubscribe: bool = False,
     show_progress: bool | None = None,
 ) -> FlowResult:
-    """Mesh, solve and read back one flow case through the bare fabric ``img`` in ``work``."""
+    """Mesh, solve and read back one flow case through the bare fabric in ``work``: the yarns
+    ``yarns`` (generated fabric) or the voxel image ``img`` (imported fabric, ``yarns`` empty),
+    removed by :func:`fabric_solid` and the volume-preserving rule."""
     return run_case(
-        s, lambda s_, lat: voxel_fraction(img, s_, lat), work, oversubscribe=oversubscribe,
+        s, fabric_solid(img, yarns), work, preserve_volume=True, oversubscribe=oversubscribe,
         show_progress=show_progress,
     )  # fmt: skip
 
@@ -242,7 +271,7 @@ class FlowStage(Stage):
     requires = ("fabric", "flow")
     uses = ("fabric", "flow", "fluid")
     products = (H5_NAME, GRID_NAME, PNG_NAME)
-    code_version = 1
+    code_version = 2  # 2: the permeability stage's solid (yarn capsules, volume-preserving removal)
 
     def check_scene(self, scene: Scene) -> list[str]:
         problems = super().check_scene(scene)
@@ -313,8 +342,9 @@ class FlowStage(Stage):
         img = read_fabric_image(fab_path)
         s = FlowSetup.from_scene(img, flow, fluid)
         start = time.monotonic()
+        yarns = [(c.points, c.radius) for c in read_yarn_chains(fab_path)]
         res = run_flow_case(
-            s, img, self.stage_dir(ctx), oversubscribe=ctx.oversubscribe,
+            s, img, self.stage_dir(ctx), yarns=yarns, oversubscribe=ctx.oversubscribe,
             show_progress=ctx.show_progress,
         )  # fmt: skip
         grid, Ug, pg = sample_grid(res, s)
