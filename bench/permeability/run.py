@@ -53,6 +53,7 @@ from fiberform.porous_media import (
 )  # fmt: skip
 from fiberform.products import FABRIC_H5, FIBERS_H5, LAYDOWN_H5, read_fabric_image
 from fiberform.provenance import machine_info
+from fiberform.scene import read_scene_yaml
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -302,7 +303,7 @@ def case_a_sheet(root: Path, rng: np.random.Generator, fibers: dict[str, Any], t
 
 
 def part_timing(tmp: Path, modes: list[str], seed: int) -> dict[str, Any]:
-    demo = yaml.safe_load((ROOT / "scenes" / "demo.yaml").read_text())
+    demo = read_scene_yaml((ROOT / "scenes" / "demo.yaml").read_text())
     out: dict[str, Any] = {"modes": modes}
     # demo sheet: the demo's own lay-down
     work = tmp / "demo"
@@ -315,7 +316,7 @@ def part_timing(tmp: Path, modes: list[str], seed: int) -> dict[str, Any]:
     # synthetic case-A sheet on 3 x 3 mm
     work = tmp / "caseA"
     work.mkdir()
-    sc = {k: demo[k] for k in ("format_version", "name", "seed", "run", "fibers", "permeability")}
+    sc = {k: demo[k] for k in ("format_version", "name", "seed", "run", "fibers", "permeability") if k in demo}
     sc.update(name="caseA", output_dir="runs/caseA", laydown={},
               fabric={"size_x_m": 3.0e-3, "size_y_m": 3.0e-3})  # fmt: skip
     sc["fibers"] = {k: v for k, v in sc["fibers"].items() if k != "target_mass_kg"}
