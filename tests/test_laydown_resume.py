@@ -19,6 +19,8 @@ import h5py
 import numpy as np
 import pytest
 
+from cli_helpers import processes_under
+
 pytestmark = pytest.mark.system
 
 SCENE = """
@@ -44,13 +46,6 @@ def _scene(work: Path, out: str, ranks: int) -> Path:
     p = work / f"{out}.yaml"
     p.write_text(SCENE % {"out": out, "ranks": ranks})
     return p
-
-
-def _cwd_under(pid: str, d: Path) -> bool:
-    try:
-        return Path(os.readlink(f"/proc/{pid}/cwd")).is_relative_to(d) and int(pid) != os.getpid()
-    except OSError:
-        return False
 
 
 def _sheet(h5: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -114,9 +109,8 @@ def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], 
         assert proc.returncode == 143, proc.returncode
         state = (work / "runs/a/laydown/stage-state.json").read_text()
         assert '"failed"' in state and "SIGTERM" in state, state
-        alive = [pid for pid in filter(str.isdigit, os.listdir("/proc"))
-                 if _cwd_under(pid, work)]
-        assert not alive, "fiberdem left running after SIGTERM"
+        alive = processes_under(work)
+        assert not alive, f"left running after SIGTERM: {alive}"
     assert killed_after is not None, "the lay-down ended before its third restart file"
     assert not (work / "runs/a/laydown/laydown.h5").exists()  # no product of a killed run
     res = subprocess.run([*fiberform_cmd, "laydown", scene.name, "--resume", "--build-dir",

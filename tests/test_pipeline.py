@@ -17,6 +17,7 @@ from pathlib import Path
 import h5py
 import pytest
 
+from cli_helpers import parse_status, processes_under
 from fiberform.errors import ConfigError
 from fiberform.pipeline import StageGraph, applicable_stages
 from fiberform.scene import Scene, load_scene
@@ -122,23 +123,7 @@ def _ff(d: Path, *args: str, timeout: float = 900) -> subprocess.CompletedProces
 def _status(d: Path) -> dict[str, tuple[str, str]]:
     r = _ff(d, "status", "s.yaml", timeout=120)
     assert r.returncode == 0, r.stderr
-    out = {}
-    for line in r.stdout.splitlines()[1:]:
-        name, state, *detail = line.split(maxsplit=2)
-        out[name] = (state, detail[0] if detail else "")
-    return out
-
-
-def _processes_in(d: Path) -> list[str]:
-    """Command lines of the processes whose working directory lies under d."""
-    out = []
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            if Path(os.readlink(f"/proc/{pid}/cwd")).is_relative_to(d) and int(pid) != os.getpid():
-                out.append(Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode())
-        except OSError:
-            continue
-    return out
+    return parse_status(r.stdout)
 
 
 def _start_flow(d: Path) -> subprocess.Popen[str]:
@@ -185,7 +170,7 @@ def test_status_through_run_change_interrupt_and_kill(tmp_path: Path) -> None:
     proc.wait(timeout=120)
     state, detail = _status(d)["flow"]
     assert proc.returncode == 143 and state == "failed" and "SIGTERM" in detail, (proc.returncode, detail)
-    assert _processes_in(d) == [], _processes_in(d)
+    assert processes_under(d) == [], processes_under(d)
 
     # killed outright (SIGKILL, no chance to clean up): failed, the process is gone
     proc = _start_flow(d)

@@ -27,6 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from cli_helpers import parse_status
 from fiberform import __version__
 from fiberform.cli import main
 from fiberform.errors import ConfigError
@@ -381,11 +382,7 @@ def _wait_ended(env: dict[str, str], ids: list[str], timeout: float = 150) -> di
 def _status(env: dict[str, str], d: Path) -> dict[str, tuple[str, str]]:
     r = _run(env, d, "status", "s.yaml")
     assert r.returncode == 0, r.stderr
-    out = {}
-    for line in r.stdout.splitlines()[1:]:
-        name, state, *detail = line.split(maxsplit=2)
-        out[name] = (state, detail[0] if detail else "")
-    return out
+    return parse_status(r.stdout)
 
 
 def _submit(env: dict[str, str], d: Path) -> tuple[str, str]:

@@ -38,6 +38,7 @@ import h5py
 from ..errors import SceneError
 from ..provenance import (
     atomic_write_text,
+    file_hash,
     in_progress_path,
     read_provenance,
     text_hash,
@@ -93,6 +94,8 @@ class Stage(abc.ABC):
     products: ClassVar[tuple[str, ...]]
     #: Bump to invalidate products written by older code.
     code_version: ClassVar[int] = 1
+    #: Programs in ``<build_dir>/bin`` the stage runs (hashed as inputs).
+    binaries: ClassVar[tuple[str, ...]] = ()
 
     # -- paths ---------------------------------------------------------------------------------
 
@@ -152,11 +155,17 @@ class Stage(abc.ABC):
         StageError or ConfigError. The base does nothing."""
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
-        """Hashes of everything the products depend on. Subclasses add their own entries."""
-        return {
+        """Hashes of everything the products depend on: the scene entries in ``uses``, the code
+        version, every upstream product of :meth:`needs` and every program of ``binaries``
+        (``"missing"`` for an absent file). Subclasses add their own entries."""
+        hashes = {
             "scene": section_hash(ctx.scene, self.uses),
             "stage_code": text_hash(f"{self.name}:{self.code_version}"),
         }
+        files = {**self.needs(ctx), **{b: ctx.build_dir / "bin" / b for b in self.binaries}}
+        for key, path in files.items():
+            hashes[key] = file_hash(path) if path.is_file() else "missing"
+        return hashes
 
     def up_to_date(self, ctx: StageContext, hashes: Mapping[str, str]) -> bool:
         paths = self.product_paths(ctx)

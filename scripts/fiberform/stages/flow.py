@@ -51,7 +51,7 @@ from ..openfoam_case import (
 )  # fmt: skip
 from ..porous_media import capsule_fraction, image_fraction
 from ..products import FABRIC_H5, read_fabric_image, read_yarn_chains
-from ..provenance import file_hash, write_dataset
+from ..provenance import write_dataset
 from ..scene import FlowSection, FluidSection, Scene
 from ._stage import Stage, StageContext
 
@@ -325,8 +325,6 @@ class FlowStage(Stage):
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
-        fab = self.needs(ctx)["fabric_h5"]
-        hashes["fabric_h5"] = file_hash(fab) if fab.is_file() else "missing"
         hashes["case_template"] = template_hash()
         return hashes
 

@@ -177,6 +177,7 @@ class Laydown(Stage):
     uses = ("seed", "domain", "fibers", "fiber_generation", "fabric", "flow", "fluid", "laydown",
             "contact")
     products = (H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME, SHEET_RESTART)
+    binaries = ("fiberdem",)
     code_version = 2
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
@@ -238,16 +239,6 @@ class Laydown(Stage):
             "fabric_h5": root / FABRIC_H5,
             "flow_grid": root / FLOW_GRID,
         }
-
-    def input_hashes(self, ctx: StageContext) -> dict[str, str]:
-        h = super().input_hashes(ctx)
-        for key, p in self.needs(ctx).items():
-            if p.is_file():
-                h[key] = file_hash(p)
-        exe = ctx.build_dir / "bin" / "fiberdem"
-        if exe.is_file():
-            h["fiberdem"] = file_hash(exe)
-        return h
 
     def preflight(self, ctx: StageContext) -> None:
         for key, p in self.needs(ctx).items():

@@ -30,7 +30,7 @@ import numpy.typing as npt
 from ..errors import StageError
 from ..inputs import STAR, LiggghtsInput, dump_format, file_token
 from ..liggghts_log import Frame, read_dump
-from ..provenance import file_hash, text_hash, write_dataset
+from ..provenance import text_hash, write_dataset
 from ..runner import build_command, liggghts_progress, run
 from ..scene import DemoParticlesSection, RunSection, Scene
 from ._stage import Stage, StageContext
@@ -219,6 +219,7 @@ class DemoParticles(Stage):
     requires = ("demo_particles", "run")
     uses = ("seed", "run", "demo_particles")
     products = ("particles.h5", "report.md")
+    binaries = ("fiberdem",)
 
     def check_scene(self, scene: Scene) -> list[str]:
         return super().check_scene(scene) + check_collision(scene)
@@ -241,8 +242,6 @@ class DemoParticles(Stage):
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
         hashes[INPUT_NAME] = text_hash(build_input(ctx.scene))
-        exe = self.fiberdem(ctx)
-        hashes["fiberdem"] = file_hash(exe) if exe.is_file() else "missing"
         return hashes
 
     def produce(

@@ -63,7 +63,7 @@ from ..products import (
     FABRIC_H5, FIBERS_H5, LAYDOWN_H5, PRESS_H5, Chain, read_fabric_image, read_sheet_chains,
     read_yarn_chains,
 )  # fmt: skip
-from ..provenance import file_hash, write_dataset
+from ..provenance import write_dataset
 from ..scene import PermeabilitySection, Scene
 from ._stage import Stage, StageContext
 
@@ -224,9 +224,8 @@ class PermeabilityStage(Stage):
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
             r = h5["result"]
             out = {f"{key}_cfm": float(r["cfm"][()]), f"{key}_cfm_uncertainty": float(r["cfm_uncertainty"][()]),
-                   f"{key}_converged": float(bool(r.attrs["converged"]))}
-            if "darcy_k" in r:
-                out[f"{key}_darcy_k_m2"] = float(r["darcy_k"][()])
+                   f"{key}_converged": float(bool(r.attrs["converged"])),
+                   f"{key}_darcy_k_m2": float(r["darcy_k"][()])}
             if "forchheimer" in h5:
                 out[f"{key}_forchheimer_beta_1_m"] = float(h5["forchheimer/beta"][()])
             return out
@@ -282,8 +281,6 @@ class PermeabilityStage(Stage):
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
-        for key, p in self.needs(ctx).items():
-            hashes[key] = file_hash(p) if p.is_file() else "missing"
         hashes["case_template"] = template_hash()
         return hashes
 

@@ -261,6 +261,7 @@ class Press(Stage):
     uses = ("seed", "domain", "fibers", "fiber_generation", "fabric", "flow", "fluid", "laydown",
             "contact", "press")
     products = (H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME, REPORT_NAME, RESTART_NAME)
+    binaries = ("fiberdem",)
     code_version = 1
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
@@ -301,16 +302,6 @@ class Press(Stage):
         if dt > pr.output_interval_s:
             problems.append(f"press.output_interval_s: must be at least the time step ({dt:g} s)")
         return problems
-
-    def input_hashes(self, ctx: StageContext) -> dict[str, str]:
-        h = super().input_hashes(ctx)
-        for key, path in self.needs(ctx).items():
-            if path.is_file():
-                h[key] = file_hash(path)
-        exe = ctx.build_dir / "bin" / "fiberdem"
-        if exe.is_file():
-            h["fiberdem"] = file_hash(exe)
-        return h
 
     def preflight(self, ctx: StageContext) -> None:
         for key, path in self.needs(ctx).items():
