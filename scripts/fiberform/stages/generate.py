@@ -283,14 +283,16 @@ def segments_intersect(fa: Fiber, fb: Fiber, gap: float = 0.0) -> bool:
 
 
 class _Grid:
-    """Uniform grid of element capsules for the intersection checks."""
+    """Uniform grid of element capsules for the intersection checks. The capsules live in arrays
+    that grow by doubling, so a check costs the capsules near it, not all placed ones."""
 
     def __init__(self, cell: float) -> None:
         self.cell = cell
         self.cells: dict[tuple[int, int, int], list[int]] = {}
-        self.p0: list[Array] = []
-        self.p1: list[Array] = []
-        self.r: list[float] = []
+        self.n = 0
+        self.p0 = np.empty((64, 3))
+        self.p1 = np.empty((64, 3))
+        self.r = np.empty(64)
 
     def _keys(self, a: Array, b: Array, r: float) -> set[tuple[int, int, int]]:
         lo = np.floor((np.minimum(a, b) - r) / self.cell).astype(int)
@@ -307,21 +309,24 @@ class _Grid:
             if not near:
                 continue
             idx = np.fromiter(near, dtype=int)
-            p0 = np.asarray(self.p0)[idx]
-            p1 = np.asarray(self.p1)[idx]
             d = segment_distances(np.repeat(f.x[k:k + 1], len(idx), 0),
-                                  np.repeat(f.x[k + 1:k + 2], len(idx), 0), p0, p1)
-            if np.any(d < rad[k] + np.asarray(self.r)[idx]):
+                                  np.repeat(f.x[k + 1:k + 2], len(idx), 0), self.p0[idx], self.p1[idx])
+            if np.any(d < rad[k] + self.r[idx]):
                 return True
         return False
 
     def add(self, f: Fiber) -> None:
         rad = np.max(0.5 * (f.radii[1:, :2] + f.radii[:-1, :2]), axis=1)
+        need = self.n + f.n - 1
+        if need > len(self.r):
+            cap = max(need, 2 * len(self.r))
+            self.p0 = np.resize(self.p0, (cap, 3))
+            self.p1 = np.resize(self.p1, (cap, 3))
+            self.r = np.resize(self.r, cap)
         for k in range(f.n - 1):
-            sid = len(self.r)
-            self.p0.append(f.x[k].copy())
-            self.p1.append(f.x[k + 1].copy())
-            self.r.append(float(rad[k]))
+            sid = self.n
+            self.p0[sid], self.p1[sid], self.r[sid] = f.x[k], f.x[k + 1], rad[k]
+            self.n += 1
             for key in self._keys(f.x[k], f.x[k + 1], rad[k]):
                 self.cells.setdefault(key, []).append(sid)
 
