@@ -194,3 +194,21 @@ def ellipse_section(a1: float, a2: float, b1: float = 0.0, b2: float = 0.0) -> d
         "I2": math.pi / 4 * (a1**3 * a2 - b1**3 * b2),
         "J": jt(a1, a2) - jt(b1, b2),
     }
+
+
+def run_fiberdem_thermo(work: Path, build_dir: Path, lines: list[str], names: list[str],
+                        ranks: int = 1) -> dict[str, np.ndarray]:
+    """Run the input ``lines`` with fiberdem on ``ranks`` MPI ranks in ``work``; the thermo rows as
+    columns ``names``."""
+    (work / "in.fiberdem").write_text("\n".join(lines) + "\n")
+    mpi = ["mpirun", "-np", str(ranks)] if ranks > 1 else []
+    proc = subprocess.run([*mpi, str(build_dir / "bin" / "fiberdem"), "-in", "in.fiberdem", "-log", "log.fiberdem",
+                           "-screen", "none"], cwd=work, env=ENV, capture_output=True, text=True,
+                          errors="replace", timeout=1800)
+    log = (work / "log.fiberdem").read_text(errors="replace") if (work / "log.fiberdem").exists() else ""
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:] + log[-3000:]
+    number = r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+    rows = [ln.split() for ln in log.splitlines()
+            if re.fullmatch(rf"\s*\d+(\s+{number}){{{len(names) - 1}}}\s*", ln)]
+    data = np.array([[float(v) for v in r] for r in rows])
+    return {k: data[:, i] for i, k in enumerate(names)}

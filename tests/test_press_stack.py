@@ -58,9 +58,7 @@ Closed forms:
 from __future__ import annotations
 
 import math
-import os
-import re
-import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -68,6 +66,9 @@ import numpy as np
 import pytest
 
 from fiberform.fiber_io import Fiber, quat_from_frames, write_fibers_liggghts
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from beam_cases import run_fiberdem_thermo  # noqa: E402
 
 pytestmark = pytest.mark.system
 
@@ -92,7 +93,6 @@ P_LOAD = 0.3 * F_MAX
 N_CROSS = NSPAN * N2
 C_BEND = S**3 / (192 * E * I_X)
 C_CONTACT = T_R**2 / (2 * MU)
-ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
 
 
 def _fiber(p0: list[float], axis: str, n: int, length: float) -> Fiber:
@@ -114,21 +114,6 @@ def _stack() -> tuple[list[Fiber], list[int]]:
         fibs.append(_fiber([S / 2 + i * S, 0, z2], "y", NSPAN * M + 1, NSPAN * S))
     fibs += [_fiber([0, S / 2 + j * S, z3], "x", 2 * N2 + 1, N2 * S) for j in range(NSPAN)]
     return fibs, first2
-
-
-def _fiberdem_thermo(work: Path, build_dir: Path, lines: list[str], names: list[str]) -> dict[str, np.ndarray]:
-    """Run the input ``lines`` with fiberdem in ``work``; the thermo rows as columns ``names``."""
-    (work / "in.fiberdem").write_text("\n".join(lines) + "\n")
-    proc = subprocess.run([str(build_dir / "bin" / "fiberdem"), "-in", "in.fiberdem", "-log", "log.fiberdem",
-                           "-screen", "none"], cwd=work, env=ENV, capture_output=True, text=True,
-                          errors="replace", timeout=1800)
-    log = (work / "log.fiberdem").read_text(errors="replace") if (work / "log.fiberdem").exists() else ""
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:] + log[-3000:]
-    number = r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
-    rows = [ln.split() for ln in log.splitlines()
-            if re.fullmatch(rf"\s*\d+(\s+{number}){{{len(names) - 1}}}\s*", ln)]
-    data = np.array([[float(v) for v in r] for r in rows])
-    return {k: data[:, i] for i, k in enumerate(names)}
 
 
 def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict[str, np.ndarray]:
@@ -173,7 +158,7 @@ def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict
         f"run {up + HOLD_STEPS}",
     ]
     t0 = time.time()
-    out = _fiberdem_thermo(work, build_dir, lines,
+    out = run_fiberdem_thermo(work, build_dir, lines,
                            ["step", "t", "fz", "disp", "floor", "newton", "splits", "s0", "ld", "s1", "top"])
     out["delta"] = 0.5 * (out["s0"] + out["s1"]) - out["ld"]
     out["wall"] = np.array([time.time() - t0])
@@ -333,7 +318,7 @@ def _adhesion_run(work: Path, build_dir: Path, terms: str, gap: float) -> dict[s
         "unfix plate", plate(z_plate - travel - G0, 0.01 * U_PLATE, SLOW_LIFT), *thermo, f"run {slow}",
         "unfix plate", plate(z_plate - travel - G0 + SLOW_LIFT, U_PLATE, 2 * travel), *thermo, f"run {up + 500}",
     ]
-    out = _fiberdem_thermo(work, build_dir, lines, ["step", "t", "fz", "tip", "b"])
+    out = run_fiberdem_thermo(work, build_dir, lines, ["step", "t", "fz", "tip", "b"])
     out["hold_end"] = np.array([down + HOLD_STEPS])
     return out
 

@@ -21,6 +21,7 @@
 #include "comm.h"
 #include "error.h"
 #include "fix_fiber_beam.h"
+#include "physics/settle.h"
 #include "physics/contact_geometry.h"
 #include "modify.h"
 #include "update.h"
@@ -91,6 +92,12 @@ FixFiberYarns::FixFiberYarns(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
       need(1);
       substeps_ = static_cast<int>(val(1));
       if (substeps_ < 1) error->all(FLERR, "fix fiber/yarns: substeps must be >= 1");
+      iarg += 2;
+    } else if (kw == "settle_mass_fraction") {
+      need(1);
+      settle_fraction_ = val(1);
+      if (!(settle_fraction_ > 0.0 && settle_fraction_ <= 1.0))
+        error->all(FLERR, "fix fiber/yarns: settle_mass_fraction must be in (0, 1]");
       iarg += 2;
     } else if (kw == "settle_measure") {
       need(1);
@@ -203,12 +210,16 @@ void FixFiberYarns::end_of_step() {
         row[3] += m;
       }
       MPI_Allreduce(loc.data(), glob.data(), static_cast<int>(loc.size()), MPI_DOUBLE, MPI_SUM, world);
+      std::vector<double> speed, mass;
       for (size_t f = 0; f + 3 < glob.size(); f += 4)
-        if (glob[f + 3] > 0.0)
-          vmax = std::max(vmax, (glob[f] * glob[f] + glob[f + 1] * glob[f + 1] + glob[f + 2] * glob[f + 2]) /
-                                    (glob[f + 3] * glob[f + 3]));
+        if (glob[f + 3] > 0.0) {
+          speed.push_back(std::sqrt(glob[f] * glob[f] + glob[f + 1] * glob[f + 1] + glob[f + 2] * glob[f + 2]) /
+                          glob[f + 3]);
+          mass.push_back(glob[f + 3]);
+        }
+      vmax = fiberform::physics::mass_fraction_speed(speed, mass, settle_fraction_);
     }
-    max_speed_ = std::sqrt(vmax);
+    max_speed_ = vmax;
   } else {
     for (int i = 0; i < atom->nlocal; ++i) {
       if (!(atom->mask[i] & groupbit)) continue;
@@ -222,6 +233,8 @@ void FixFiberYarns::end_of_step() {
 }
 
 void FixFiberYarns::init() {
+  if (settle_fraction_ < 1.0 && !settle_fiber_)
+    error->all(FLERR, "fix fiber/yarns: settle_mass_fraction needs settle_measure fiber");
   beam_ = FixFiberBeam::find(lmp);
   if (!beam_) error->all(FLERR, "fix fiber/yarns: needs a fix fiber/beam (fiber topology and sections)");
   implicit_ = beam_->implicit();

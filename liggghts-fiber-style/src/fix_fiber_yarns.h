@@ -11,6 +11,8 @@
        remove_every N      check for removal every N steps (default 100)
        settle V M          every M steps: count consecutive checks with max node speed < V (m/s)
        settle_measure node|fiber   node speeds (default) or fiber centre-of-mass speeds
+       settle_mass_fraction q      with fiber: the speed below which fibers carrying q of the mass
+                                   move (default 1: every fiber; physics/settle.h)
        integrator cvode|substep   contact sub-integration (default cvode, as pair_style fiber/dlvo)
        implicit_force newton|impulse|position  with implicit fibers: newton (default) = the contact
                            law acts inside each fiber's Newton solve (physics/static_bodies.h, any
@@ -75,6 +77,7 @@ class FixFiberYarns : public Fix {
   class FixFiberBeam *beam_ = nullptr;
   double settle_speed_ = -1.0;  // < 0: no settle check
   bool settle_fiber_ = false;   // settle on fiber centre-of-mass speeds instead of node speeds
+  double settle_fraction_ = 1.0;  // settle_measure fiber: speed below which this mass fraction moves
   double settled_checks_ = 0, max_speed_ = 0;
   double removed_fibers_ = 0, removed_mass_ = 0, removed_nodes_ = 0;
   double local_[3] = {0, 0, 0};  // yarn contacts, plane contacts, -min gap

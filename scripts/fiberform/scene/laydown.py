@@ -36,6 +36,11 @@ class LaydownSection(_Section):
         "centre-of-mass speed; free fiber ends fluttering in the flow do not count)",
         default="node",
     )
+    settle_mass_fraction: float = quantity(
+        "With settle_measure fiber: the fibers carrying this fraction of the mass must be slower "
+        "than the threshold (the rest, e.g. a few fines fluttering in the flow, is ignored; 1: "
+        "every fiber)", "1", default=1.0, gt=0.0, le=1.0,
+    )  # fmt: skip
     settle_checks: int = quantity(
         "Consecutive checks below settle_speed_m_s that end the run", "1", default=5, ge=1,
         le=10000,
@@ -122,6 +127,9 @@ class LaydownSection(_Section):
 
     @model_validator(mode="after")
     def _check(self) -> LaydownSection:
+        if self.settle_mass_fraction != 1.0 and self.settle_measure != "fiber":
+            raise scene_problem("settle_mass_fraction", "only used with settle_measure fiber",
+                                self.settle_mass_fraction)
         if self.timestep_s > self.check_interval_s:
             raise scene_problem("check_interval_s", "must be at least timestep_s",
                                 self.check_interval_s)

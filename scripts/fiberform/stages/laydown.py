@@ -136,7 +136,8 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     contact_commands(s, scene, YARNS_NAME, [
         "remove_below", removal_height(scene), "remove_every", steps_per_check,
         "settle", settle_speed if settle_speed is not None else ld.settle_speed_m_s,
-        steps_per_check, "settle_measure", ld.settle_measure])
+        steps_per_check, "settle_measure", ld.settle_measure,
+        *(["settle_mass_fraction", ld.settle_mass_fraction] if ld.settle_measure == "fiber" else [])])
     s.command("timestep", ld.timestep_s)
     s.command("variable", "settled", "equal", fix_ref("yarns", 7))
     s.command("thermo_style", "custom", "step", "atoms", fix_ref("yarns", 1), fix_ref("yarns", 2),
