@@ -75,3 +75,24 @@ def test_a_fluttering_fine_does_not_keep_the_sheet_running(fiberdem_build: Path,
 
 def test_a_sinking_sheet_is_not_settled(fiberdem_build: Path, tmp_path: Path) -> None:
     assert _settled(tmp_path / "sink", fiberdem_build, 0.95, True) == 0.0
+
+
+def _frame(speeds: list[float], masses: list[float]) -> dict[str, np.ndarray]:
+    """A dump frame of one-node-per-fiber 'fibers' moving along x (the report's measure reads the
+    columns fix fiber/beam's dump gives: f_beam[1] fiber ID, mass, velocities)."""
+    n = len(speeds)
+    return {"f_beam[1]": np.arange(1.0, n + 1), "mass": np.asarray(masses, float),
+            "vx": np.asarray(speeds, float), "vy": np.zeros(n), "vz": np.zeros(n)}
+
+
+def test_the_report_measures_what_the_fix_counts() -> None:
+    """fiber_sheet.max_fiber_speed (the lay-down report's measure) on the hand values of
+    test_settle.cpp: the fine is ignored at 0.99, not at 0.999 or 1."""
+    from fiberform.fiber_sheet import max_fiber_speed
+
+    fr = _frame([1e-4] * 99 + [5e-2], [1e-9] * 99 + [0.2e-9])
+    assert max_fiber_speed(fr) == 5e-2
+    assert max_fiber_speed(fr, 0.99) == 1e-4
+    assert max_fiber_speed(fr, 0.999) == 5e-2
+    edge = _frame([3.0, 1.0, 2.0], [1.0, 1.0, 2.0])
+    assert [max_fiber_speed(edge, q) for q in (0.25, 0.5, 0.75, 0.76)] == [1.0, 2.0, 2.0, 3.0]

@@ -355,12 +355,16 @@ class Laydown(Stage):
             if len(fr.ids) else 0.0 for fr in frames])
         fiber_speeds = np.array([max_fiber_speed(fr.columns) if len(fr.ids) else 0.0
                                  for fr in frames])
-        measure = fiber_speeds if ld.settle_measure == "fiber" else max_speeds
+        q = ld.settle_mass_fraction
+        settle_speeds = (np.array([max_fiber_speed(fr.columns, q) if len(fr.ids) else 0.0 for fr in frames])
+                         if q < 1.0 else fiber_speeds)
+        measure = settle_speeds if ld.settle_measure == "fiber" else max_speeds
         r = h5.create_group("run")
         r.attrs.update({
             "steps": int(steps_done), "simulated_time_s": steps_done * ld.timestep_s,
             "settled": settled, "settle_speed_m_s": v_settle, "superficial_velocity_m_s": u_s,
-            "settle_checks": ld.settle_checks, "settle_measure": ld.settle_measure, "wall_time_s": wall, "steps_per_check": steps_per_check,
+            "settle_checks": ld.settle_checks, "settle_measure": ld.settle_measure,
+            "settle_mass_fraction": ld.settle_mass_fraction, "wall_time_s": wall, "steps_per_check": steps_per_check,
             "removal_height_m": removal_height(scene), "fabric_top_m": fabric_top,
             "sheet_thickness_m": thickness,
             "min_element_clearance_m": float(clearances.min()) if len(clearances) else math.inf,
@@ -390,6 +394,9 @@ class Laydown(Stage):
         write_dataset(snap, "max_speed", max_speeds, "m/s", "largest node speed per snapshot")
         write_dataset(snap, "max_fiber_speed", fiber_speeds, "m/s",
                       "largest fiber centre-of-mass speed per snapshot")
+        if q < 1.0:
+            write_dataset(snap, "settle_fiber_speed", settle_speeds, "m/s",
+                          f"fiber centre-of-mass speed below which {q:g} of the mass moves, per snapshot")
 
         write_sheet_vtu(tmp[VTU_NAME], xs, fid_s, offsets)
         final = work / SHEET_RESTART
@@ -411,8 +418,9 @@ class Laydown(Stage):
             f"- simulated {steps_done * ld.timestep_s * 1e3:.3f} ms in {steps_done} steps of "
             f"{ld.timestep_s:g} s; settled: "
             f"{'yes' if settled else '**NO** (max_time_s reached before the criterion was met)'} "
-            f"(criterion: largest {ld.settle_measure} speed"
-            f"{' (centre of mass)' if ld.settle_measure == 'fiber' else ''} < {v_settle:.4g} m/s"
+            f"(criterion: {'largest ' if q >= 1.0 else ''}{ld.settle_measure} speed"
+            f"{' (centre of mass)' if ld.settle_measure == 'fiber' else ''}"
+            f"{f' below which {q:g} of the fiber mass moves' if q < 1.0 else ''} < {v_settle:.4g} m/s"
             + (f" = {ld.settle_speed_fraction:g} x superficial velocity {u_s:.4g} m/s"
                if ld.settle_speed_fraction is not None else "")
             + f" at {ld.settle_checks} consecutive checks every {ld.check_interval_s:g} s; "
