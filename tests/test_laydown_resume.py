@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import subprocess
-import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
-from cli_helpers import processes_under
+from cli_helpers import processes_under, terminate_when
 
 pytestmark = pytest.mark.system
 
@@ -87,31 +85,14 @@ def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], 
     (work / "runs/a/laydown/laydown.h5").unlink(missing_ok=True)
     lw = work / "runs/a/laydown/work"
     shutil.rmtree(lw, ignore_errors=True)  # earlier restart files must not be mistaken for new ones
-    proc = subprocess.Popen([*fiberform_cmd, "laydown", scene.name, "--force", "--build-dir",
-                             str(build_dir)], cwd=work, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
-    killed_after = None
-    try:
-        deadline = time.monotonic() + 600
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (lw / "laydown.3000.restart").is_file():
-                killed_after = 3000
-                if how == "SIGTERM":
-                    proc.send_signal(signal.SIGTERM)
-                    proc.wait(timeout=60)
-                break
-            time.sleep(0.05)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    rc = terminate_when([*fiberform_cmd, "laydown", scene.name, "--force", "--build-dir", str(build_dir)], work,
+                        lw / "laydown.3000.restart", timeout_s=600, kill_group=how == "SIGKILL")
     if how == "SIGTERM":
-        assert proc.returncode == 143, proc.returncode
+        assert rc == 143, rc
         state = (work / "runs/a/laydown/stage-state.json").read_text()
         assert '"failed"' in state and "SIGTERM" in state, state
         alive = processes_under(work)
         assert not alive, f"left running after SIGTERM: {alive}"
-    assert killed_after is not None, "the lay-down ended before its third restart file"
     assert not (work / "runs/a/laydown/laydown.h5").exists()  # no product of a killed run
     res = subprocess.run([*fiberform_cmd, "laydown", scene.name, "--resume", "--build-dir",
                           str(build_dir)], cwd=work, capture_output=True, text=True,

@@ -26,6 +26,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from cli_helpers import terminate_when
 
 from fiberform.openfoam_case import BoxSetup, make_lattice, run_case
 from fiberform.porous_media import (
@@ -33,6 +34,10 @@ from fiberform.porous_media import (
     forchheimer_fit, hydraulic_radius, line_fraction, subgrid_resistance, tomadakis_sotirchos,
 )  # fmt: skip
 from fiberform.products import FABRIC_H5, FIBERS_H5, LAYDOWN_H5, Chain, read_sheet_chains
+
+#: Relative difference of a resumed and an uninterrupted solve (restart state written with 12
+#: digits; both stop at the residual tolerance 1e-6).
+TOL_RESUME = 1e-6
 
 needs_openfoam = pytest.mark.skipif(shutil.which("simpleFoam") is None,
                                     reason="OpenFOAM (simpleFoam) not installed")  # fmt: skip
@@ -392,7 +397,31 @@ def test_stage_on_bare_fabric(tmp_path: Path) -> None:
         L = float(r_["layer_thickness"][()])
         assert float(r_["darcy_k"][()]) / (1.81e-5 * u * L / 10.0) == pytest.approx(1.0, rel=1e-12)
         assert len(f["history/q_bottom"]) == int(f["solver"].attrs["iterations"])
+        u_ref, n_ref = u, int(f["solver"].attrs["iterations"])
     assert "CFM" in (d / "report.md").read_text()
+    # Killed (SIGTERM once the outflow history reached iteration 150, after the time directory 100
+    # was written) and run again: the solve continues from iteration 100, the outflow history
+    # joins the two parts (one value per iteration, the killed run's iterations past 100 dropped),
+    # and the result is the uninterrupted one within TOL_RESUME.
+    cmd = [sys.executable, "-m", "fiberform", "permeability", "s.yaml"]
+    hist = d / "case" / "postProcessing" / "flowRateBottom" / "0" / "surfaceFieldValue.dat"
+
+    def past_150() -> bool:
+        return hist.is_file() and hist.read_text().count("\n") > 155
+
+    shutil.rmtree(d / "case")  # the finished case's history must not be taken for the new one's
+    assert terminate_when([*cmd, "--force"], tmp_path, past_150) == 143
+    assert not (d / "permeability.h5").exists()
+    r = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, errors="replace",
+                       timeout=600, check=False)
+    assert r.returncode == 0, r.stdout + r.stderr
+    with h5py.File(d / "permeability.h5") as f:
+        assert int(f["solver"].attrs["resumed_from_iteration"]) == 100
+        assert abs(int(f["solver"].attrs["iterations"]) - n_ref) <= 1
+        its = f["history/iteration"][...]
+        assert list(its) == list(range(1, len(its) + 1))
+        assert bool(f["result"].attrs["converged"])
+        assert float(f["result/superficial_velocity"][()]) == pytest.approx(u_ref, rel=TOL_RESUME)
 
 
 @pytest.mark.system

@@ -14,6 +14,7 @@ afterok chains, job records and queue states in ``fiberform status``.
 from __future__ import annotations
 
 import contextlib
+import csv
 import json
 import os
 import re
@@ -94,8 +95,13 @@ def test_slurm_script_asks_for_the_stage_ranks(tmp_path: Path, monkeypatch: pyte
                                 "#SBATCH --kill-on-invalid-dep=yes", "#SBATCH --nodes=1", "#SBATCH --qos=normal",
                                 "#SBATCH --time=0-01:30:00"]
     assert "#SBATCH --ntasks=1" in fabric
-    assert flow.splitlines()[-1] == (f"exec {Path(sys.executable).absolute()} -m fiberform flow {tmp_path}/s.yaml "
-                                     f"--build-dir {(ROOT / 'build').resolve()}")
+    # flow is split: fiberform prepare, the solver line itself on the stage's 2 ranks, fiberform collect
+    py, build = Path(sys.executable).absolute(), (ROOT / "build").resolve()
+    assert f"{py} -m fiberform prepare flow {tmp_path}/s.yaml --build-dir {build} || status=$?" in flow
+    assert (f"(cd {tmp_path}/runs/pipe/flow/case && mpirun -np 2 simpleFoam -parallel) > "
+            f"{tmp_path}/runs/pipe/flow/log.simpleFoam 2>&1") in flow.splitlines()
+    assert flow.splitlines()[-1] == f"exec {py} -m fiberform collect flow {tmp_path}/s.yaml --build-dir {build}"
+    assert fabric.splitlines()[-1] == f"exec {py} -m fiberform fabric {tmp_path}/s.yaml --build-dir {build}"
     replay = (tmp_path / "runs/pipe/jobs/submit-slurm.sh").read_text()
     assert f"job_flow=$(sbatch --parsable --dependency=afterok:${{job_fabric}} {tmp_path}/runs/pipe/jobs/flow.slurm)" \
         in replay
@@ -137,11 +143,18 @@ BAD = [
 def test_bad_options_exit_2_naming_the_option_and_write_nothing(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
         scheduler: str, args: list[str], named: str) -> None:
-    (tmp_path / "s.yaml").write_text(SCENE.replace("delta_p_Pa: 100.0", "delta_p_Pa: 100.0, ranks: 2"))
-    rc = _ff(tmp_path, monkeypatch, "submit", "s.yaml", "--scheduler", scheduler, "--dry-run", *args)
+    _assert_refused(tmp_path, monkeypatch, capsys, SCENE.replace("delta_p_Pa: 100.0", "delta_p_Pa: 100.0, ranks: 2"),
+                    ["submit", "s.yaml", "--scheduler", scheduler, "--dry-run", *args], named)
+
+
+def _assert_refused(d: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], scene: str,
+                    args: list[str], named: str) -> None:
+    """`fiberform ARGS` on the scene text exits 2 naming ``named`` and writes nothing."""
+    (d / "s.yaml").write_text(scene)
+    rc = _ff(d, monkeypatch, *args)
     err = capsys.readouterr().err
     assert rc == 2 and named in err, err
-    assert not (tmp_path / "runs").exists()
+    assert not (d / "runs").exists()
 
 
 def test_qos_is_slurm_only_and_pbs_needs_qsub(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -183,10 +196,11 @@ def test_from_a_stage_whose_upstream_is_neither_done_nor_queued(tmp_path: Path, 
 
 QSUB = """#!/bin/bash
 # stand-in for PBS's qsub (Debian has no PBS server): logs its arguments, prints a PBS-style job ID
+# (an array job's, NNN[].server, for a script with a -J directive)
 n=$(( $(wc -l < "$0.log" 2>/dev/null || echo 0) + 1 ))
 echo "$*" >> "$0.log"
 if [[ -n "${QSUB_FAIL_AT:-}" && $n -ge $QSUB_FAIL_AT ]]; then echo "qsub: Unknown queue" >&2; exit 170; fi
-echo "$n.pbs-test"
+if grep -q '^#PBS -J ' "${@: -1}"; then echo "$n[].pbs-test"; else echo "$n.pbs-test"; fi
 """
 QSTAT = """#!/bin/bash
 # stand-in for PBS's qstat -x -f ID
@@ -227,6 +241,84 @@ def test_pbs_submission_through_stand_in_qsub(tmp_path: Path, monkeypatch: pytes
     err = capsys.readouterr().err
     assert "qsub did not return a job ID (jobs queued before: fabric 1.pbs-test)" in err and "Unknown queue" in err, err
     assert list(json.loads((jobs / "jobs.json").read_text())["jobs"]) == ["fabric"]
+
+
+# ---- sweeps as job arrays -----------------------------------------------------------------------
+
+SWEEP = ["sweep", "s.yaml", "--set", "flow.delta_p_Pa=50.0,100.0"]
+
+
+def test_pbs_sweep_array_scripts_match_the_expected_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """`sweep --submit pbs`: one array script per stage (-J 0-1, PBS_ARRAY_INDEX picks the line of
+    variants.txt), afterok on the whole upstream array; checked against tests/data/submit/sweep-*."""
+    (tmp_path / "s.yaml").write_text(SCENE)
+    rc = _ff(tmp_path, monkeypatch, *SWEEP, "--submit", "pbs", "--dry-run", "--partition", "workq",
+             "--account", "proj_1", "--time", "1-02:03:04")
+    assert rc == 0, capsys.readouterr().err
+    jobs = tmp_path / "runs/pipe-sweep/jobs"
+    assert sorted(p.name for p in jobs.iterdir()) == ["fabric.pbs", "flow.pbs", "submit-pbs.sh", "variants.txt"]
+    subst = {"@WORKDIR@": str(tmp_path), "@PYTHON@": str(Path(sys.executable).absolute()),
+             "@BUILD@": str((ROOT / "build").resolve()), "@VERSION@": __version__}
+    for name in ("fabric.pbs", "flow.pbs", "submit-pbs.sh"):
+        want = (DATA / f"sweep-{name}").read_text()
+        for k, v in subst.items():
+            want = want.replace(k, v)
+        assert (jobs / name).read_text() == want, name
+        subprocess.run(["bash", "-n", str(jobs / name)], check=True)
+    assert (jobs / "variants.txt").read_text().splitlines() == [
+        f"{tmp_path}/runs/pipe-sweep/scenes/pipe_000.yaml", f"{tmp_path}/runs/pipe-sweep/scenes/pipe_001.yaml"]
+    assert not (jobs / "jobs.json").exists()
+
+
+def test_sweep_array_through_stand_in_qsub(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """The qsub lines of a sweep (the flow array after the whole fabric array, by its NNN[] ID),
+    the array IDs in the sweep's jobs.json and task k's ID in variant k's records."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "qsub").write_text(QSUB)
+    (bin_dir / "qsub").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    (tmp_path / "s.yaml").write_text(SCENE)
+    assert _ff(tmp_path, monkeypatch, *SWEEP, "--submit", "pbs") == 0, capsys.readouterr().err
+    jobs = tmp_path / "runs/pipe-sweep/jobs"
+    assert (bin_dir / "qsub.log").read_text().splitlines() == [
+        f"{jobs}/fabric.pbs", f"-W depend=afterok:1[].pbs-test {jobs}/flow.pbs"]
+    rec = json.loads((jobs / "jobs.json").read_text())["jobs"]
+    assert (rec["fabric"]["job_id"], rec["flow"]["job_id"]) == ("1[].pbs-test", "2[].pbs-test")
+    for k in (0, 1):
+        v = json.loads((tmp_path / f"runs/pipe-sweep/pipe_00{k}/jobs/jobs.json").read_text())["jobs"]
+        assert (v["fabric"]["job_id"], v["flow"]["job_id"], v["flow"]["after"]) == (
+            f"1[{k}].pbs-test", f"2[{k}].pbs-test", [f"1[{k}].pbs-test"])
+
+
+BAD_SWEEP = [
+    (["--submit", "slurm", "--partition", "debug\n#SBATCH --uid=0"], "--partition"),
+    (["--submit", "slurm", "--account", "$(id)"], "--account"),
+    (["--submit", "pbs", "--qos", "normal"], "--qos: Slurm only"),
+    (["--submit", "slurm", "--time", "10:00"], "--time"),
+    (["--submit", "slurm", "--ntasks", "0"], "--ntasks"),
+    (["--submit", "slurm", "--nodes", "2", "--ntasks", "1"], "--nodes"),
+    (["--submit", "lsf"], "--submit"),
+    (["--submit", "slurm", "--no-run"], "--no-run"),
+    (["--partition", "debug"], "--partition: only with --submit"),
+    (["--dry-run"], "--dry-run: only with --submit"),
+    (["--submit", "slurm", "--to", "nosuch"], "--to 'nosuch'"),
+]
+
+
+@pytest.mark.parametrize(("args", "named"), BAD_SWEEP, ids=[f"{i}" for i in range(len(BAD_SWEEP))])
+def test_bad_sweep_submit_options_exit_2_and_write_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        args: list[str], named: str) -> None:
+    _assert_refused(tmp_path, monkeypatch, capsys, SCENE, [*SWEEP, "--dry-run", *args], named)
+
+
+def test_pbs_array_needs_two_variants(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    _assert_refused(tmp_path, monkeypatch, capsys, SCENE, ["sweep", "s.yaml", "--submit", "pbs", "--dry-run"],
+                    "at least 2 variants")
 
 
 def test_time_forms() -> None:
@@ -419,7 +511,9 @@ def test_slurm_runs_the_chain_and_cancels_after_a_failure(slurm: dict[str, str],
     assert ended == {fabric: ("COMPLETED", "None"), flow: ("COMPLETED", "None")}, ended
     for p in ("fabric/fabric.h5", "flow/flow.h5", "flow/flow.grid"):
         assert (d / "runs/pipe" / p).is_file(), p
-    assert "flow: done in" in (d / f"runs/pipe/jobs/flow-{flow}.out").read_text()
+    out = (d / f"runs/pipe/jobs/flow-{flow}.out").read_text()
+    assert "flow: prepared; run in" in out and "flow: collected in" in out, out  # prepare, solver, collect
+    assert "SIMPLE solution converged" in (d / "runs/pipe/flow/log.simpleFoam").read_text()
     st = _status(env, d)
     assert st["fabric"][0] == "done" and st["fabric"][1].endswith(f"(slurm {fabric}, COMPLETED)"), st
     assert st["flow"][0] == "done" and st["flow"][1].endswith(f"(slurm {flow}, COMPLETED)"), st
@@ -438,3 +532,41 @@ def test_slurm_runs_the_chain_and_cancels_after_a_failure(slurm: dict[str, str],
     assert st["fabric"] == ("failed", f"(slurm {fabric2}, FAILED (NonZeroExitCode))"), st
     assert st["flow"] == ("failed", f"(slurm {flow2}, CANCELLED (DependencyNeverSatisfied))"), st
     assert not (d / f"runs/pipe/jobs/flow-{flow2}.out").exists()  # never started
+
+
+@pytest.mark.system
+@pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
+def test_slurm_sweep_runs_as_job_arrays(slurm: dict[str, str], tmp_path: Path) -> None:
+    """`sweep --submit slurm` of 2 variants (flow.delta_p_Pa 50, 100 Pa): a fabric array and a flow
+    array with aftercorr on it run to completion; each variant's status names its array task;
+    collect tabulates both, the larger pressure drop giving the larger superficial velocity."""
+    env, d = slurm, tmp_path
+    (d / "s.yaml").write_text(SCENE)
+    _scontrol(env, "update", "PartitionName=debug", "State=DOWN")
+    r = _run(env, d, *SWEEP, "--submit", "slurm", "--partition", "debug", "--time", "5")
+    assert r.returncode == 0, r.stderr
+    sweep = d / "runs/pipe-sweep"
+    jobs = json.loads((sweep / "jobs/jobs.json").read_text())["jobs"]
+    fabric, flow = jobs["fabric"]["job_id"], jobs["flow"]["job_id"]
+    assert jobs["flow"]["after"] == [fabric]
+    shown = _scontrol(env, "-o", "show", "job", flow)
+    assert f"Dependency=aftercorr:{fabric}_*(unfulfilled)" in shown, shown
+    st = _run(env, d, "status", "runs/pipe-sweep/scenes/pipe_001.yaml")
+    assert st.returncode == 0, st.stderr
+    rows = parse_status(st.stdout)
+    assert rows["fabric"] == ("queued", f"(slurm {fabric}_1, PENDING (PartitionDown))"), rows
+    _scontrol(env, "update", "PartitionName=debug", "State=UP")
+    tasks = [f"{j}_{k}" for j in (fabric, flow) for k in (0, 1)]
+    ended = _wait_ended(env, tasks, timeout=300)
+    assert all(s == ("COMPLETED", "None") for s in ended.values()), ended
+    for k in (0, 1):
+        st = _run(env, d, "status", f"runs/pipe-sweep/scenes/pipe_00{k}.yaml")
+        rows = parse_status(st.stdout)
+        assert rows["flow"][0] == "done" and rows["flow"][1].endswith(f"(slurm {flow}_{k}, COMPLETED)"), rows
+        assert (d / f"runs/pipe-sweep/jobs/flow-{flow}_{k}.out").is_file()
+    r = _run(env, d, "collect", "runs/pipe-sweep")
+    assert r.returncode == 0, r.stderr
+    table = list(csv.DictReader((sweep / "collect.csv").open()))
+    assert [float(row["flow.delta_p_Pa"]) for row in table] == [50.0, 100.0]
+    u = [float(row["flow_superficial_velocity_m_s"]) for row in table]
+    assert 0 < u[0] < u[1], u

@@ -202,15 +202,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    """Expand the scene into variants (--set values x --seeds), write them, run them."""
-    from .sweep import expand, parse_set, run_sweep, write_sweep
+    """Expand the scene into variants (--set values x --seeds), write them, run or submit them."""
+    from .sweep import expand, parse_set, run_sweep, submit_sweep, write_sweep
 
+    opts = None
+    if args.submit is not None:
+        if args.no_run:
+            raise ConfigError("--no-run: not with --submit (--dry-run writes the scripts without submitting)")
+        opts = executors.batch_options(args.submit, partition=args.partition, account=args.account,
+                                       qos=args.qos, time=args.time, nodes=args.nodes, ntasks=args.ntasks)
+    else:
+        given = [o for o in ("partition", "account", "qos", "time", "nodes", "ntasks", "dry_run")
+                 if getattr(args, o) not in (None, False)]
+        if given:
+            raise ConfigError(f"--{given[0].replace('_', '-')}: only with --submit slurm|pbs")
     sets = [parse_set(t) for t in args.set or []]
     base = Path(args.scene)
     sweep_dir, variants = expand(base, sets, args.seeds, args.first_seed)
     # --from/--to and the stage checks, before anything is written
     plan_run(StageContext(scene=load_scene(base), scene_path=base, build_dir=Path(args.build_dir)),
              args.start, args.stop, None)
+    if opts is not None:
+        return submit_sweep(opts, base, sweep_dir, variants, sets, Path(args.build_dir), args.start, args.stop,
+                            dry_run=args.dry_run, echo=lambda line: print(line, flush=True))
     files = write_sweep(base, sweep_dir, variants, sets)
     print(f"sweep: {len(files)} variant(s) in {sweep_dir} (record {sweep_dir / 'sweep.json'})")
     if args.no_run:
@@ -224,11 +238,47 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_collect(args: argparse.Namespace) -> int:
-    from .sweep import collect
+#: Exit status of `fiberform prepare` when the stage's products are up to date (nothing to run).
+UP_TO_DATE_STATUS = 3
 
-    out_csv, out_png, n = collect(Path(args.sweep), Path(args.build_dir))
-    print(f"collect: {n} variant(s) -> {out_csv}, {out_png}")
+
+def _split_stage(name: str, command: str) -> Stage:
+    st = STAGES.get(name)
+    if st is None or not st.splits:
+        split = ", ".join(n for n, s in STAGES.items() if s.splits)
+        what = "not a stage" if st is None else "runs in one step (no program line of its own)"
+        raise ConfigError(f"{command} STAGE {name!r}: {what}; stages split into prepare / program / collect: {split}")
+    return st
+
+
+def _cmd_prepare(args: argparse.Namespace) -> int:
+    """First part of a batch job: write the inputs of the stage's program lines."""
+    st = _split_stage(args.stage, "prepare")
+    ctx = _context(args, load_scene(args.scene))
+    if not st.execute_prepare(ctx):
+        print(f"{st.name}: up to date; nothing to run (exit status {UP_TO_DATE_STATUS}); --force to redo")
+        return UP_TO_DATE_STATUS
+    for prog in st.programs(ctx):
+        mpi = f"mpirun -np {prog.ranks} " if prog.ranks > 1 else ""
+        print(f"{st.name}: prepared; run in {prog.cwd}: {mpi}{' '.join(prog.argv)} > {prog.log} 2>&1")
+    print(f"{st.name}: then `fiberform collect {st.name} {args.scene}`")
+    return 0
+
+
+def _cmd_collect(args: argparse.Namespace) -> int:
+    """A sweep's table (one argument), or the last part of a stage's batch job (STAGE SCENE)."""
+    if len(args.target) == 1:
+        from .sweep import collect
+
+        out_csv, out_png, n = collect(Path(args.target[0]), Path(args.build_dir))
+        print(f"collect: {n} variant(s) -> {out_csv}, {out_png}")
+        return 0
+    if len(args.target) != 2:
+        raise ConfigError(f"collect {' '.join(args.target)}: give SWEEP_DIR, or STAGE SCENE")
+    st = _split_stage(args.target[0], "collect")
+    args.scene = args.target[1]
+    outcome = st.execute_collect(_context(args, load_scene(args.scene)))
+    print(f"{st.name}: collected in {outcome.elapsed_s:.2f} s -> {', '.join(str(p) for p in outcome.products)}")
     return 0
 
 
@@ -284,10 +334,21 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(
             "--resume",
             action="store_true",
-            help="continue an interrupted stage from its last restart file instead of starting "
-            "over (laydown; a stage without restart files starts over)",
+            help="continue an interrupted lay-down from its last restart file instead of starting "
+            "over; with --force: an OpenFOAM stage resumes its killed solve anyway (without --force it "
+            "resumes one of the same inputs by itself)",
         )
         add_build(p)
+
+    def add_batch_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--partition", metavar="NAME",
+                       help=f"partition (Slurm) or queue (PBS -q); ^{executors.NAME_PATTERN}$")
+        p.add_argument("--account", metavar="NAME", help=f"account to charge; ^{executors.NAME_PATTERN}$")
+        p.add_argument("--qos", metavar="NAME", help=f"quality of service (Slurm only); ^{executors.NAME_PATTERN}$")
+        p.add_argument("--time", metavar="LIMIT", help=f"wall-time limit of each job: {executors.TIME_FORM}")
+        p.add_argument("--nodes", metavar="N", help="nodes per job (default: the scheduler's)")
+        p.add_argument("--ntasks", metavar="N",
+                       help="tasks per job (default: the stage's MPI ranks; never fewer than those)")
 
     p = sub.add_parser(
         "run", help="run the stages the scene enables, in the order of the stage graph, and write report.md"
@@ -302,7 +363,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--oversubscribe", action="store_true",
                    help="allow more MPI ranks than cores (slow: for testing only)")
     p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted stage from its last restart file (laydown)")
+                   help="continue an interrupted lay-down from its last restart file (OpenFOAM stages resume "
+                   "a killed solve of the same inputs by themselves)")
     add_build(p)
     p.set_defaults(func=_cmd_run)
 
@@ -318,27 +380,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="start", metavar="STAGE", help="as for run")
     p.add_argument("--to", dest="stop", metavar="STAGE", help="as for run (e.g. --to laydown)")
     p.add_argument("--no-run", action="store_true", help="write the variants and sweep.json only")
+    p.add_argument("--submit", metavar="SCHEDULER", choices=executors.SCHEDULERS,
+                   help="instead of running the variants here, submit one job array per stage to slurm "
+                   "(sbatch --array, aftercorr between stages) or pbs (qsub -J, afterok); scripts in "
+                   "<sweep dir>/jobs/")
+    add_batch_options(p)
+    p.add_argument("--dry-run", action="store_true", help="with --submit: write and print the scripts, "
+                   "submit nothing")
     add_build(p)
     p.set_defaults(func=_cmd_sweep)
 
-    p = sub.add_parser("collect", help="gather the key results of a sweep's variants into collect.csv and "
-                       "collect.png")
-    p.add_argument("sweep", metavar="SWEEP_DIR", help="the folder `fiberform sweep` wrote (holds sweep.json)")
+    p = sub.add_parser("collect", help="SWEEP_DIR: gather the key results of a sweep's variants into "
+                       "collect.csv and collect.png; STAGE SCENE: read the outputs of a prepared stage's "
+                       "program lines and write its products (the last part of a batch job)")
+    p.add_argument("target", nargs="+", metavar="SWEEP_DIR | STAGE SCENE",
+                   help="the folder `fiberform sweep` wrote (holds sweep.json), or a stage and a scene")
+    p.add_argument("--oversubscribe", action="store_true", help=argparse.SUPPRESS)
     add_build(p)
     p.set_defaults(func=_cmd_collect)
+
+    p = sub.add_parser("prepare", help="write the inputs of a stage's program lines (the first part of a "
+                       f"batch job; exit status {UP_TO_DATE_STATUS}: up to date, nothing to run)")
+    p.add_argument("stage", metavar="STAGE", help="a stage that runs an external program ("
+                   + ", ".join(n for n, s in STAGES.items() if s.splits) + ")")
+    add_stage_options(p)
+    p.set_defaults(func=_cmd_prepare)
 
     p = sub.add_parser("submit", help="write one Slurm or PBS batch script per stage that is not done and "
                        "submit them with afterok dependencies (job IDs in <output_dir>/jobs/jobs.json)")
     p.add_argument("scene", metavar="SCENE", help="scene YAML file")
     p.add_argument("--scheduler", required=True, choices=executors.SCHEDULERS,
                    help="slurm (sbatch) or pbs (qsub)")
-    p.add_argument("--partition", metavar="NAME", help=f"partition (Slurm) or queue (PBS -q); ^{executors.NAME_PATTERN}$")
-    p.add_argument("--account", metavar="NAME", help=f"account to charge; ^{executors.NAME_PATTERN}$")
-    p.add_argument("--qos", metavar="NAME", help=f"quality of service (Slurm only); ^{executors.NAME_PATTERN}$")
-    p.add_argument("--time", metavar="LIMIT", help=f"wall-time limit of each job: {executors.TIME_FORM}")
-    p.add_argument("--nodes", metavar="N", help="nodes per job (default: the scheduler's)")
-    p.add_argument("--ntasks", metavar="N",
-                   help="tasks per job (default: the stage's MPI ranks; never fewer than those)")
+    add_batch_options(p)
     p.add_argument("--from", dest="start", metavar="STAGE", help="start at STAGE (as in `run`)")
     p.add_argument("--to", dest="stop", metavar="STAGE", help="stop at STAGE (as in `run`)")
     p.add_argument("--force", nargs="*", metavar="STAGE",

@@ -3,13 +3,23 @@
 
 ``fiberform submit SCENE --scheduler slurm|pbs`` writes, for every selected stage that is not done,
 ``<output_dir>/jobs/<stage>.slurm`` (or ``.pbs``): a plain bash script whose directives ask for the
-stage's MPI ranks as tasks and whose one command is ``fiberform <stage> SCENE --build-dir DIR``
-(absolute paths); the stage launches its own programs (``mpirun -np N`` when its ``ranks`` > 1)
-inside the allocation, exactly as ``fiberform run`` does on a workstation (the ``local`` executor).
-The scripts are submitted in graph order, each with ``afterok`` on the jobs of the stages it needs
-(Slurm ``--dependency=afterok:ID[:ID]``, PBS ``-W depend=afterok:ID[:ID]``); the job IDs go to
-``<output_dir>/jobs/jobs.json`` and the submission itself to ``jobs/submit-<scheduler>.sh``, which
-resubmits the same chain by hand. ``fiberform status`` reads the queue state of recorded jobs.
+stage's MPI ranks as tasks. A stage split into prepare / program lines / collect
+(:attr:`fiberform.stages.Stage.splits`: the stages that run fiberdem or simpleFoam) runs
+``fiberform prepare STAGE SCENE``, then its program lines themselves
+(``(cd CASE && mpirun -np N simpleFoam -parallel) > LOG 2>&1``, readable and rerunnable by hand),
+then ``fiberform collect STAGE SCENE``; generate and fabric (no external program) run
+``fiberform <stage> SCENE --build-dir DIR``, as ``fiberform run`` does on a workstation (the
+``local`` executor). All paths are absolute. The scripts are submitted in graph order, each with
+``afterok`` on the jobs of the stages it needs (Slurm ``--dependency=afterok:ID[:ID]``, PBS
+``-W depend=afterok:ID[:ID]``); the job IDs go to ``<output_dir>/jobs/jobs.json`` and the
+submission itself to ``jobs/submit-<scheduler>.sh``, which resubmits the same chain by hand.
+``fiberform status`` reads the queue state of recorded jobs.
+
+Sweeps (``fiberform sweep ... --submit slurm|pbs``): one job array per stage, task k for variant k
+(the scene on line k + 1 of ``<sweep dir>/jobs/variants.txt``, picked through SLURM_ARRAY_TASK_ID /
+PBS_ARRAY_INDEX); between stages Slurm ``aftercorr`` (task k after task k of the upstream array),
+PBS ``afterok`` on the whole upstream array (:data:`ARRAY_DEPENDENCY`). Task k's ID is recorded in
+variant k's own ``jobs/jobs.json``.
 
 Safety: every value that reaches a script is a validated number, a validated identifier (scene,
 stage, partition, account and qos names) or a path quoted with :func:`shlex.quote` (paths in
@@ -34,6 +44,7 @@ from . import __version__
 from .errors import ConfigError, RunError
 from .pipeline import StageGraph, StageStatus
 from .provenance import atomic_write_text
+from .runner import Program
 
 __all__ = [
     "SCHEDULERS",
@@ -42,11 +53,14 @@ __all__ = [
     "JobSpec",
     "QueueState",
     "annotate_status",
+    "array_task_id",
     "batch_options",
     "parse_time",
+    "plan_array_jobs",
     "plan_jobs",
     "queue_states",
     "read_records",
+    "record_array_tasks",
     "submit_jobs",
 ]
 
@@ -152,6 +166,8 @@ class JobSpec:
     after_stages: tuple[str, ...]
     #: jobs queued earlier (recorded in jobs.json) this job waits for
     after_jobs: tuple[str, ...]
+    #: tasks of a job array (a sweep: one per variant); 0 for a single job
+    tasks: int = 0
 
 
 def _path(p: Path, what: str, directive: bool = False) -> str:
@@ -165,6 +181,18 @@ def _path(p: Path, what: str, directive: bool = False) -> str:
     return s
 
 
+#: Exit status of ``fiberform prepare`` when the stage is up to date (fiberform.cli).
+UP_TO_DATE_STATUS = 3
+
+
+def _program_line(p: Program) -> str:
+    """A program line as a shell command: in its folder, on its ranks, output to its log."""
+    mpi = ["mpirun", "-np", str(int(p.ranks))] if p.ranks > 1 else []
+    argv = " ".join(shlex.quote(a) for a in [*mpi, *p.argv])
+    return (f"(cd {shlex.quote(_path(p.cwd, 'program folder'))} && {argv}) "
+            f"> {shlex.quote(_path(p.log, 'program log'))} 2>&1")
+
+
 def _hms(seconds: int) -> str:
     return f"{seconds // 3600:02d}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"
 
@@ -174,10 +202,12 @@ def _slurm_time(seconds: int) -> str:
     return f"{days}-{_hms(rest)}"
 
 
-def _directives(opts: BatchOptions, job_name: str, ntasks: int, out: str) -> list[str]:
+def _directives(opts: BatchOptions, job_name: str, ntasks: int, out: str, tasks: int = 0) -> list[str]:
     if opts.scheduler == "slurm":
         lines = [f"--job-name={job_name}", f"--ntasks={ntasks}", f"--output={out}",
                  "--kill-on-invalid-dep=yes"]
+        if tasks:
+            lines.append(f"--array=0-{tasks - 1}")
         if opts.nodes is not None:
             lines.append(f"--nodes={opts.nodes}")
         if opts.partition is not None:
@@ -193,6 +223,8 @@ def _directives(opts: BatchOptions, job_name: str, ntasks: int, out: str) -> lis
     per_node = -(-ntasks // nodes)
     lines = [f"-N {job_name}", f"-l select={nodes}:ncpus={per_node}:mpiprocs={per_node}", "-j oe",
              f"-o {out}", "-V"]
+    if tasks:
+        lines.append(f"-J 0-{tasks - 1}")
     if opts.time_s is not None:
         lines.append(f"-l walltime={_hms(opts.time_s)}")
     if opts.partition is not None:
@@ -202,33 +234,64 @@ def _directives(opts: BatchOptions, job_name: str, ntasks: int, out: str) -> lis
     return [f"#PBS {d}" for d in lines]
 
 
+#: The environment variable holding the array task index, by scheduler.
+ARRAY_INDEX = {"slurm": "SLURM_ARRAY_TASK_ID", "pbs": "PBS_ARRAY_INDEX"}
+#: The dependency of a job array on the array of an upstream stage: Slurm ``aftercorr`` (task k
+#: waits for task k of the upstream array only: each variant's chain is independent, and a failed
+#: variant cancels only its own downstream tasks); PBS has no per-task dependency: ``afterok`` on
+#: the whole upstream array.
+ARRAY_DEPENDENCY = {"slurm": "aftercorr", "pbs": "afterok"}
+
+
+def _dependency(opts: BatchOptions, tasks: int) -> str:
+    kind = ARRAY_DEPENDENCY[opts.scheduler] if tasks else "afterok"
+    return f"--dependency={kind}:" if opts.scheduler == "slurm" else f"-W depend={kind}:"
+
+
 def render_script(opts: BatchOptions, *, stage: str, scene_name: str, scene_path: Path, workdir: Path,
                   build_dir: Path, jobs_dir: Path, ntasks: int, ranks: int, force: bool,
-                  needs: Sequence[str], python: Path) -> str:
-    """The batch script of one stage (text); ``needs``: its upstream stages. Paths must be absolute."""
-    for p in (scene_path, workdir, build_dir, jobs_dir, python):
+                  needs: Sequence[str], python: Path, tasks: int = 0,
+                  variants_file: Path | None = None, programs: Sequence[Sequence[Program]] = ()) -> str:
+    """The batch script of one stage (text); ``needs``: its upstream stages. Paths must be absolute.
+    ``tasks`` > 0: a job array of that many tasks (a sweep); task k runs the stage on the scene
+    on line k + 1 of ``variants_file`` (``scene_path`` is then the sweep's base scene, named in
+    the comments only). ``programs``: the program lines of a split stage (one list, or one per
+    array task): the script runs ``fiberform prepare``, the lines, ``fiberform collect``; else
+    ``fiberform STAGE`` alone."""
+    for p in (scene_path, workdir, build_dir, jobs_dir, python, *([variants_file] if variants_file else [])):
         if not p.is_absolute():
             raise ConfigError(f"internal: {p} is not absolute")
     if not re.fullmatch(r"[a-z][a-z0-9-]{0,63}", stage) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]{0,63}", scene_name):
         raise ConfigError(f"internal: stage {stage!r} or scene name {scene_name!r} is not an identifier")
+    if tasks and variants_file is None:
+        raise ConfigError("internal: a job array needs its variants file")
     jobs_s = _path(jobs_dir, "output folder", directive=True)
     if opts.scheduler == "slurm":
-        job_name, out_s = f"ff-{scene_name}-{stage}", f"{jobs_s}/{stage}-%j.out"
+        job_name = f"ff-{scene_name}-{stage}"
+        out_s = f"{jobs_s}/{stage}-%A_%a.out" if tasks else f"{jobs_s}/{stage}-%j.out"
     else:  # PBS: names of at most 15 characters starting with a letter are portable
-        job_name, out_s = f"{stage}-{scene_name}"[:15], f"{jobs_s}/{stage}.pbs.out"
+        job_name = f"{stage}-{scene_name}"[:15]
+        out_s = f"{jobs_s}/{stage}.^array_index^.pbs.out" if tasks else f"{jobs_s}/{stage}.pbs.out"
     sub = SUBMIT[opts.scheduler]
-    dep = ("--dependency=afterok:" if opts.scheduler == "slurm" else "-W depend=afterok:")
-    cmd = [_path(python, "python"), "-m", "fiberform", stage, _path(scene_path, "SCENE"),
-           "--build-dir", _path(build_dir, "--build-dir")]
-    if force:
-        cmd.append("--force")
+    dep = _dependency(opts, tasks)
+    scene_arg = '"$scene"' if tasks else shlex.quote(_path(scene_path, "SCENE"))
+    py = shlex.quote(_path(python, "python"))
+    tail = ["--build-dir", shlex.quote(_path(build_dir, "--build-dir")), *(["--force"] if force else [])]
+    cmd = [py, "-m", "fiberform", stage, scene_arg, *tail]
     script = jobs_dir / f"{stage}.{SUFFIX[opts.scheduler]}"
+    what = (f"Stage {stage} of the {tasks} variants of sweep '{scene_name}' (one array task each)" if tasks
+            else f"Stage {stage} of scene '{scene_name}'")
+    if programs:
+        ranks_note = ("`fiberform prepare` writes the inputs, the program lines below run the stage's programs "
+                      "(mpirun -np N on N > 1 ranks), `fiberform collect` writes the products.")
+    else:
+        ranks_note = (f"The stage runs its programs itself: on {ranks} MPI rank(s) "
+                      + (f"(mpirun -np {ranks} inside this allocation)." if ranks > 1 else "(no mpirun)."))
     lines = [
         "#!/bin/bash",
-        *_directives(opts, job_name, ntasks, out_s),
-        f"# Stage {stage} of scene '{scene_name}', written by `fiberform submit` (fiberform {__version__}).",
-        f"# The stage runs its programs itself: on {ranks} MPI rank(s) "
-        + (f"(mpirun -np {ranks} inside this allocation)." if ranks > 1 else "(no mpirun)."),
+        *_directives(opts, job_name, ntasks, out_s, tasks),
+        f"# {what}, written by `fiberform {'sweep --submit' if tasks else 'submit'}` (fiberform {__version__}).",
+        "# " + ranks_note,
     ]
     if needs:
         lines += [f"# Needs the products of: {', '.join(needs)}. Resubmit by hand after their jobs:",
@@ -239,9 +302,34 @@ def render_script(opts: BatchOptions, *, stage: str, scene_name: str, scene_path
         "set -eu",
         f"cd {shlex.quote(_path(workdir, 'working folder'))}",
         'export WM_PROJECT_DIR="${WM_PROJECT_DIR:-/usr/share/openfoam}"',
-        "exec " + " ".join(shlex.quote(a) for a in cmd),
-        "",
     ]
+    if tasks:
+        assert variants_file is not None
+        index = ARRAY_INDEX[opts.scheduler]
+        lines += [f"# Array task k runs the variant on line k + 1 of {variants_file.name} ({index}).",
+                  f'scene=$(sed -n "$(( {index} + 1 ))p" {shlex.quote(_path(variants_file, "variants file"))})',
+                  'test -n "$scene"']
+    if programs:
+        if len(programs) != (tasks or 1):
+            raise ConfigError("internal: one list of program lines per array task expected")
+        lines += [f"# 1. inputs (exit status {UP_TO_DATE_STATUS}: the products are up to date, nothing to run)",
+                  "status=0",
+                  " ".join([py, "-m", "fiberform", "prepare", stage, scene_arg, *tail]) + " || status=$?",
+                  f'if [ "$status" -eq {UP_TO_DATE_STATUS} ]; then exit 0; fi',
+                  'if [ "$status" -ne 0 ]; then exit "$status"; fi',
+                  "# 2. the program line(s)"]
+        if tasks:
+            index = ARRAY_INDEX[opts.scheduler]
+            lines.append(f'case "${index}" in')
+            for k, progs in enumerate(programs):
+                lines.append(f"  {k}) " + " && ".join(_program_line(p) for p in progs) + " ;;")
+            lines += [f'  *) echo "no program lines for task ${index}" >&2; exit 1 ;;', "esac"]
+        else:
+            lines += [_program_line(p) for p in programs[0]]
+        lines.append("# 3. outputs -> products")
+        cmd = [py, "-m", "fiberform", "collect", stage, scene_arg, "--build-dir",
+               shlex.quote(_path(build_dir, "--build-dir"))]
+    lines += ["exec " + " ".join(cmd), ""]
     return "\n".join(lines)
 
 
@@ -323,7 +411,7 @@ def _query(cmd: Sequence[str], timeout: float = 30) -> tuple[str | None, str]:
 
 def _slurm_states(ids: Sequence[str]) -> dict[str, tuple[str, str]]:
     found: dict[str, tuple[str, str]] = {}
-    out, err = _query(["squeue", "-h", "-t", "all", "-j", ",".join(ids), "-o", "%i|%T|%r"])
+    out, err = _query(["squeue", "-h", "-r", "-t", "all", "-j", ",".join(ids), "-o", "%i|%T|%r"])
     if out is None and ("contact slurm controller" in err or "not found" in err or "timed out" in err):
         return {j: ("UNKNOWN", f"squeue: {err.splitlines()[-1] if err else 'failed'}") for j in ids}
     for line in (out or "").splitlines():
@@ -403,6 +491,18 @@ def live_jobs(states: Mapping[str, QueueState]) -> dict[str, QueueState]:
 
 # ---- planning and submitting -------------------------------------------------------------------
 
+def _job_tasks(opts: BatchOptions, stage: str, ranks: int, why: str) -> int:
+    """The tasks a stage's job asks for: --ntasks (never below the stage's ``ranks``) or the ranks;
+    ConfigError for too few tasks or more nodes than tasks."""
+    if opts.ntasks is not None and opts.ntasks < ranks:
+        raise ConfigError(f"--ntasks {opts.ntasks}: stage {stage} runs on {ranks} MPI ranks ({why}); ask for "
+                          "at least that many")
+    ntasks = opts.ntasks or ranks
+    if opts.nodes is not None and opts.nodes > ntasks:
+        raise ConfigError(f"--nodes {opts.nodes}: more nodes than the {ntasks} task(s) of stage {stage}")
+    return ntasks
+
+
 def plan_jobs(graph: StageGraph, opts: BatchOptions, *, start: str | None, stop: str | None,
               forced: set[str], workdir: Path, python: Path,
               states: Mapping[str, QueueState]) -> list[JobSpec]:
@@ -445,47 +545,123 @@ def plan_jobs(graph: StageGraph, opts: BatchOptions, *, start: str | None, stop:
                 raise ConfigError(f"stage {name} needs the products of {u}, which is {status[u].state} and "
                                   "neither selected nor queued: select it too (drop --from) or run it first")
         ranks = st.ranks(ctx)
-        if opts.ntasks is not None and opts.ntasks < ranks:
-            raise ConfigError(f"--ntasks {opts.ntasks}: stage {name} runs on {ranks} MPI ranks (its scene "
-                              "section's ranks); ask for at least that many")
-        ntasks = opts.ntasks or ranks
-        if opts.nodes is not None and opts.nodes > ntasks:
-            raise ConfigError(f"--nodes {opts.nodes}: more nodes than the {ntasks} task(s) of stage {name}")
+        ntasks = _job_tasks(opts, name, ranks, "its scene section's ranks")
+        progs = [_absolute(st.programs(ctx), workdir)] if st.splits else []
         text = render_script(opts, stage=name, scene_name=ctx.scene.name, scene_path=scene_path,
                              workdir=workdir, build_dir=build, jobs_dir=jdir, ntasks=ntasks, ranks=ranks,
-                             force=name in forced, needs=ups, python=python)
+                             force=name in forced, needs=ups, python=python, programs=progs)
         specs.append(JobSpec(name, jdir / f"{name}.{SUFFIX[opts.scheduler]}", text, ntasks,
                              tuple(after_stages), tuple(after_jobs)))
         chosen.add(name)
     return specs
 
 
+VARIANTS_NAME = "variants.txt"
+
+
+def array_task_id(scheduler: str, array_id: str, k: int) -> str:
+    """The ID of task ``k`` of a job array: Slurm ``<id>_<k>``, PBS ``<n>[<k>].<server>``."""
+    return f"{array_id}_{k}" if scheduler == "slurm" else array_id.replace("[]", f"[{k}]", 1)
+
+
+def plan_array_jobs(graphs: Sequence[StageGraph], opts: BatchOptions, *, start: str | None, stop: str | None,
+                    sweep_name: str, base_scene: Path, jobs_folder: Path, workdir: Path, python: Path,
+                    states: Mapping[str, QueueState]) -> tuple[list[JobSpec], str]:
+    """One job array per selected stage for the sweep variants (``graphs``: one stage graph per
+    variant, in variant order; task k = variant k), in graph order, each array after the arrays of
+    the stages it needs (:data:`ARRAY_DEPENDENCY`); and the text of the variants file (one absolute
+    scene path a line). Every selected stage is submitted: a task whose variant is already done
+    finds its stage up to date and ends at once. ConfigError (nothing written) when the variants
+    do not share their stages, a stage of the sweep is still queued or running (``states``), a
+    PBS array would have fewer than 2 tasks, or --ntasks is below a stage's ranks."""
+    if not graphs:
+        raise ConfigError("internal: a sweep without variants")
+    if opts.scheduler == "pbs" and len(graphs) < 2:
+        raise ConfigError("--submit pbs: a PBS job array needs at least 2 variants (use `fiberform submit` "
+                          "for one scene)")
+    first = [st.name for st in graphs[0].select(start, stop)]
+    for g in graphs[1:]:
+        names = [st.name for st in g.select(start, stop)]
+        if names != first:
+            raise ConfigError(f"--set: the variants enable different stages ({', '.join(first)} vs "
+                              f"{', '.join(names)}); a sweep submits the same stages for every variant")
+    live = live_jobs(states)
+    if live:
+        name, q = next(iter(live.items()))
+        cancel = "scancel" if q.record.scheduler == "slurm" else "qdel"
+        raise ConfigError(f"stage {name} of this sweep is already submitted ({q.label()}): wait for it, or "
+                          f"`{cancel} {q.record.job_id}` before submitting the sweep again")
+    variants_file = jobs_folder / VARIANTS_NAME
+    scenes = [g.ctx.scene_path if g.ctx.scene_path.is_absolute() else (workdir / g.ctx.scene_path) for g in graphs]
+    for s in scenes:
+        _path(s, "variant scene")
+    build = graphs[0].ctx.build_dir.resolve()
+    specs: list[JobSpec] = []
+    for name in first:
+        ups = graphs[0].upstream[name]
+        ranks = max(g.stages[name].ranks(g.ctx) for g in graphs)
+        ntasks = _job_tasks(opts, name, ranks, "its scene section's ranks, largest over the variants")
+        after = tuple(u for u in ups if u in first)
+        split = graphs[0].stages[name].splits
+        progs = [_absolute(g.stages[name].programs(g.ctx), workdir) for g in graphs] if split else []
+        text = render_script(opts, stage=name, scene_name=sweep_name, scene_path=base_scene, workdir=workdir,
+                             build_dir=build, jobs_dir=jobs_folder, ntasks=ntasks, ranks=ranks, force=False,
+                             needs=after, python=python, tasks=len(graphs), variants_file=variants_file,
+                             programs=progs)
+        specs.append(JobSpec(name, jobs_folder / f"{name}.{SUFFIX[opts.scheduler]}", text, ntasks, after, (),
+                             len(graphs)))
+    return specs, "".join(f"{s}\n" for s in scenes)
+
+
+def record_array_tasks(opts: BatchOptions, made: Sequence[JobRecord], variant_outputs: Sequence[Path]) -> None:
+    """Record task k of every submitted array in the job records of variant k (its
+    ``<output_dir>/jobs/jobs.json``), so that ``fiberform status VARIANT`` shows its queue state."""
+    for k, out in enumerate(variant_outputs):
+        records = read_records(out)
+        for rec in made:
+            records[rec.stage] = JobRecord(rec.stage, rec.scheduler, array_task_id(opts.scheduler, rec.job_id, k),
+                                           rec.script, rec.submitted_utc,
+                                           tuple(array_task_id(opts.scheduler, a, k) for a in rec.after))
+        jobs_dir(out).mkdir(parents=True, exist_ok=True)
+        _write_records(out, records)
+
+
+def _absolute(programs: Sequence[Program], workdir: Path) -> list[Program]:
+    """The program lines with absolute folders and logs (a stage folder relative to the working
+    folder of the job)."""
+    def a(p: Path) -> Path:
+        return p if p.is_absolute() else workdir / p
+
+    return [Program(p.argv, p.ranks, a(p.cwd), a(p.log)) for p in programs]
+
+
 def _var(stage: str) -> str:
     return "job_" + stage.replace("-", "_")
 
 
-def submit_command(opts: BatchOptions, script: Path, after: Sequence[str]) -> list[str]:
-    """The argument list that submits ``script`` after the jobs ``after`` (IDs)."""
+def submit_command(opts: BatchOptions, script: Path, after: Sequence[str], tasks: int = 0) -> list[str]:
+    """The argument list that submits ``script`` after the jobs ``after`` (IDs; for a job array
+    (``tasks`` > 0) the upstream arrays, :data:`ARRAY_DEPENDENCY`)."""
+    dep = _dependency(opts, tasks) + ":".join(after)
     if opts.scheduler == "slurm":
-        return ["sbatch", "--parsable", *([f"--dependency=afterok:{':'.join(after)}"] if after else []),
-                str(script)]
-    return ["qsub", *(["-W", f"depend=afterok:{':'.join(after)}"] if after else []), str(script)]
+        return ["sbatch", "--parsable", *([dep] if after else []), str(script)]
+    return ["qsub", *(dep.split(" ", 1) if after else []), str(script)]
 
 
 def replay_script(opts: BatchOptions, specs: Sequence[JobSpec], workdir: Path) -> str:
     """``jobs/submit-<scheduler>.sh``: the same submission as shell commands, IDs in variables."""
+    what = "sweep --submit" if specs and specs[0].tasks else "submit --scheduler"
     lines = ["#!/bin/bash",
-             (f"# Resubmits the jobs of the last `fiberform submit --scheduler {opts.scheduler}` "
+             (f"# Resubmits the jobs of the last `fiberform {what} {opts.scheduler}` "
               "in the same order, with the same dependencies."),
              "set -euo pipefail", f"cd {shlex.quote(str(workdir))}"]
     for s in specs:
         after = [f"${{{_var(u)}}}" for u in s.after_stages] + list(s.after_jobs)
+        dep = f" {_dependency(opts, s.tasks)}{':'.join(after)}" if after else ""
         if opts.scheduler == "slurm":
-            dep = f" --dependency=afterok:{':'.join(after)}" if after else ""
             lines += [f"{_var(s.stage)}=$(sbatch --parsable{dep} {shlex.quote(str(s.script))})",
                       f"{_var(s.stage)}=${{{_var(s.stage)}%%;*}}"]
         else:
-            dep = f" -W depend=afterok:{':'.join(after)}" if after else ""
             lines.append(f"{_var(s.stage)}=$(qsub{dep} {shlex.quote(str(s.script))})")
         lines.append(f'echo "{s.stage}: job ${{{_var(s.stage)}}}"')
     return "\n".join(lines) + "\n"
@@ -525,7 +701,7 @@ def submit_jobs(opts: BatchOptions, specs: Sequence[JobSpec], output_path: Path,
     made: list[JobRecord] = []
     for s in specs:
         after = [ids[u] for u in s.after_stages] + list(s.after_jobs)
-        cmd = submit_command(opts, s.script, after)
+        cmd = submit_command(opts, s.script, after, s.tasks)
         try:
             r = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=120, check=False)
         except (OSError, subprocess.TimeoutExpired) as exc:

@@ -12,7 +12,20 @@ import numpy.typing as npt
 
 from .errors import StageError
 
-__all__ = ["Frame", "read_dump", "thermo_rows"]
+__all__ = ["Frame", "read_dump", "thermo_rows", "total_wall_time"]
+
+
+def total_wall_time(log: str) -> float:
+    """Seconds of the last ``Total wall time: H:MM:SS`` line of a LIGGGHTS log (whole seconds; the
+    wall time of a run started outside fiberform, e.g. by a batch script); 0 when there is none."""
+    found = [line.split(":", 1)[1].strip() for line in log.splitlines() if line.startswith("Total wall time:")]
+    if not found:
+        return 0.0
+    try:
+        h, m, s = (int(x) for x in found[-1].split(":"))
+    except ValueError:
+        return 0.0
+    return float(h * 3600 + m * 60 + s)
 
 
 def thermo_rows(log: str) -> list[list[float]]:

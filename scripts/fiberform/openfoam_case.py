@@ -24,10 +24,12 @@ foamlib from validated numbers (no text from a scene reaches a case file).
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import re
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,15 +39,23 @@ import numpy.typing as npt
 
 from ._versions import repo_root
 from .errors import StageError
-from .provenance import file_hash, text_hash
-from .runner import openfoam_progress, run
+from .provenance import atomic_write_text, file_hash, text_hash
+from .runner import Program, openfoam_progress, run
 
 __all__ = [
     "CASE_DIR",
     "BoxSetup",
     "CaseResult",
     "Lattice",
+    "PreparedCase",
     "SolidFraction",
+    "case_key",
+    "collect_case",
+    "load_prepared",
+    "prepare_or_resume",
+    "resume_point",
+    "solver_wall_time",
+    "solver_program",
     "geometric_cells",
     "make_lattice",
     "run_case",
@@ -62,6 +72,10 @@ TEMPLATE = "fabric-flow"
 MAX_GROWTH = 1.2
 #: Name of the function object that records the outflow through ``bottom`` at every iteration.
 FLOW_RATE_FO = "flowRateBottom"
+#: Iterations between the time directories simpleFoam writes while it runs (the points a killed
+#: run resumes from); ``purgeWrite`` keeps the last two, so a half-written last one leaves the
+#: one before it.
+WRITE_EVERY_ITERATIONS = 100
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -182,6 +196,8 @@ class CaseResult:
     #: Iteration numbers and outflow through ``bottom`` (m^3/s) at each; empty unless recorded.
     history_iteration: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     history_q_bottom_m3_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    #: Iteration the solve continued from (0: not resumed; > 0: a killed run's time directory).
+    resumed_from_iteration: int = 0
 
     @property
     def imbalance(self) -> float:
@@ -239,7 +255,8 @@ def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool)
 
     with FoamFile(case / "system" / "controlDict") as c:
         c["endTime"] = int(s.max_iterations)
-        c["writeInterval"] = int(s.max_iterations)
+        c["writeInterval"] = min(WRITE_EVERY_ITERATIONS, int(s.max_iterations))
+        c["purgeWrite"] = 2
         c["writeFormat"] = "ascii"
         if record_flow_rate:
             # sum(phi) over the outlet after every SIMPLE iteration (the flow-rate history)
@@ -288,21 +305,28 @@ def _patch_sum(path: Path, patch: str) -> float:
 
 
 def _read_flow_rate_history(case: Path) -> tuple[npt.NDArray[np.int64], FloatArray]:
-    """(iterations, sum(phi) over ``bottom``) written by the function object, m^3/s."""
-    files = sorted((case / "postProcessing" / FLOW_RATE_FO).glob("*/surfaceFieldValue*.dat"))
-    its: list[int] = []
-    qs: list[float] = []
-    for f in files:
+    """(iterations, sum(phi) over ``bottom``) written by the function object, m^3/s. A resumed
+    run writes a new file (in a folder named by its start time, or with that time as suffix): the
+    files are read in the order of their start times, and each drops what the earlier ones hold
+    after its start (the iterations a killed run did past its last time directory)."""
+    files = []
+    for f in (case / "postProcessing" / FLOW_RATE_FO).glob("*/surfaceFieldValue*.dat"):
+        suffix = f.stem.partition("_")[2]
+        t0 = float(suffix) if _is_number(suffix) else float(f.parent.name) if _is_number(f.parent.name) else 0.0
+        files.append((t0, f.stat().st_mtime_ns, f))
+    history: dict[int, float] = {}
+    for t0, _, f in sorted(files):
+        history = {i: q for i, q in history.items() if i <= t0}
         for line in f.read_text(errors="replace").splitlines():
             parts = line.split()
             if not parts or line.lstrip().startswith("#"):
                 continue
             try:
-                its.append(round(float(parts[0])))
-                qs.append(float(parts[1]))
+                history[round(float(parts[0]))] = float(parts[1])
             except (ValueError, IndexError):
                 continue
-    return np.array(its, dtype=np.int64), np.array(qs, dtype=np.float64)
+    its = sorted(history)
+    return np.array(its, dtype=np.int64), np.array([history[i] for i in its], dtype=np.float64)
 
 
 #: Resistances within this factor of each other share one cellZone (one porosity source).
@@ -404,26 +428,158 @@ _TIME = re.compile(r"^Time = (\d+)\s*$", re.MULTILINE)
 _RESIDUAL = re.compile(r"Solving for (Ux|Uy|Uz|p), Initial residual = ([0-9.eE+-]+)")
 
 
-def run_case(
+#: Files every time directory simpleFoam writes holds (the state it restarts from).
+TIME_FILES = ("U", "p", "phi", "uniform/time")
+#: The case record of a prepared case (inputs, setup, cell map), written last by prepare_or_resume.
+CASE_RECORD, CASE_MAP = "fiberform-case.json", "fiberform-case.npz"
+#: The solver log of a resumed run's earlier parts.
+EARLIER_LOG = "log.simpleFoam.earlier"
+_FOOTER = b"// ************************************************************************* //"
+
+
+@dataclass(frozen=True)
+class PreparedCase:
+    """A meshed case with its initial fields: where each fluid cell sits on the lattice."""
+
+    work: Path
+    lattice: Lattice
+    z_centres: FloatArray
+    cell_index: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]
+    solid_fraction: npt.NDArray[np.float32]
+    wall_times_s: dict[str, float]
+    #: iteration the solver starts from (0: a fresh solve; > 0: resumed from that time directory)
+    start_iteration: int = 0
+
+
+def _tool(work: Path, case: Path, cmd: list[str], name: str, times: dict[str, float], ranks: int = 1,
+          progress: object = None, oversubscribe: bool = False, show_progress: bool | None = None) -> None:
+    res = run(
+        cmd, work / f"log.{name}", cwd=case, ranks=ranks, progress=progress,  # type: ignore[arg-type]
+        oversubscribe=oversubscribe, description=name, show_progress=show_progress,
+    )  # fmt: skip
+    times[name] = res.elapsed_s
+
+
+def case_key(s: BoxSetup, inputs: Mapping[str, str], **flags: object) -> str:
+    """Identity of a prepared case: the stage's input hashes, the setup and the case options. A
+    case directory is resumed only by a run with the same key."""
+    return text_hash(json.dumps({"inputs": dict(inputs), "setup": asdict(s), "flags": flags},
+                                sort_keys=True, default=str))
+
+
+def _write_record(case: Path, key: str, times: Mapping[str, float], start_iteration: int) -> None:
+    atomic_write_text(case / CASE_RECORD, json.dumps({"key": key, "wall_times_s": dict(times),
+                                                      "start_iteration": int(start_iteration)}) + "\n")
+
+
+def solver_program(work: Path, ranks: int, max_iterations: int) -> Program:
+    """The solver's program line for the case in ``work`` (run in ``work/case``, output to
+    ``work/log.simpleFoam``; ``startFrom latestTime`` makes the same line start a prepared case or
+    continue a resumed one)."""
+    work = work.resolve()
+    return Program(("simpleFoam", "-parallel") if ranks > 1 else ("simpleFoam",), int(ranks), work / CASE_DIR,
+                   work / "log.simpleFoam", openfoam_progress(0.0, float(max_iterations)))
+
+
+def _complete_time(d: Path) -> bool:
+    """Every file of TIME_FILES present, ending in OpenFOAM's closing divider, and readable."""
+    from foamlib import FoamFieldFile
+
+    for name in TIME_FILES:
+        f = d / name
+        try:
+            with open(f, "rb") as fh:
+                fh.seek(max(0, f.stat().st_size - 200))
+                if _FOOTER not in fh.read():
+                    return False
+            if "/" not in name:
+                FoamFieldFile(f).internal_field  # noqa: B018 - parses the values
+        except Exception:  # missing, cut short or unparsable: not a state to trust  # noqa: BLE001
+            return False
+    return True
+
+
+def _time_dirs(d: Path) -> dict[float, Path]:
+    return {float(t.name): t for t in d.iterdir() if t.is_dir() and _is_number(t.name) and float(t.name) > 0}
+
+
+def resume_point(work: Path, key: str) -> int | None:
+    """The iteration a killed solve in ``work/case`` continues from, or None (start over): the case
+    must be prepared with the same ``key`` (inputs, setup, options); the latest time directory that
+    is complete (:func:`_complete_time`) in the case or in every processor folder wins (0: the
+    prepared initial state). Later, incomplete time directories are deleted, so simpleFoam's
+    ``startFrom latestTime`` starts from the chosen one."""
+    case = work.resolve() / CASE_DIR
+    try:
+        rec = json.loads((case / CASE_RECORD).read_text())
+    except (OSError, ValueError):
+        return None
+    if not key or rec.get("key") != key or not (case / CASE_MAP).is_file():
+        return None
+    holders = sorted(case.glob("processor[0-9]*")) or [case]
+    common: set[float] | None = None
+    for h in holders:
+        ok = {t for t, d in _time_dirs(h).items() if _complete_time(d)}
+        common = ok if common is None else common & ok
+    start = max(common or {0.0})
+    for h in [case, *holders]:
+        for t, d in _time_dirs(h).items():
+            if t > start:
+                shutil.rmtree(d)
+    return round(start)
+
+
+def load_prepared(work: Path, s: BoxSetup, key: str | None = None) -> PreparedCase:
+    """The prepared case in ``work/case`` (cell map and record); with ``key``, StageError unless it
+    was prepared from the same inputs."""
+    case = work.resolve() / CASE_DIR
+    try:
+        rec = json.loads((case / CASE_RECORD).read_text())
+        with np.load(case / CASE_MAP) as m:
+            idx = (m["fi"], m["fj"], m["fk"])
+            z, frac = m["z_centres"], m["frac"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise StageError(f"{case}: no prepared case ({exc}); prepare it first") from None
+    if key is not None and rec.get("key") != key:
+        raise StageError(f"{case}: prepared from other inputs than the scene's now; prepare it again")
+    return PreparedCase(work.resolve(), make_lattice(s), z, idx, frac, dict(rec.get("wall_times_s", {})),
+                        int(rec.get("start_iteration", 0)))
+
+
+def prepare_or_resume(
     s: BoxSetup,
     solid_fraction: SolidFraction,
     work: Path,
     *,
+    inputs: Mapping[str, str] | None = None,
+    resume: bool = False,
     record_flow_rate: bool = False,
     preserve_volume: bool = False,
     resistance: SolidFraction | None = None,
     oversubscribe: bool = False,
     show_progress: bool | None = None,
-) -> CaseResult:
-    """Mesh, solve and read back one case in ``work`` (``work/case`` is replaced; logs
-    ``work/log.<tool>``). ``record_flow_rate`` adds the per-iteration outflow history;
-    ``preserve_volume`` removes the cells of :func:`volume_preserving` instead of those with solid
-    fraction >= 1/2; ``resistance`` gives the Darcy resistance 1/k [1/m^2] of each zone cell
-    (sub-grid solid), applied by :func:`_write_porous_zones`."""
+) -> PreparedCase:
+    """The case of ``work`` ready for :func:`solver_program`. With ``resume``, a killed solve of the
+    same inputs (``inputs``: the stage's input hashes, recorded with the case; None: no resume)
+    continues from :func:`resume_point` (the killed run's log appended to EARLIER_LOG). Otherwise
+    ``work/case`` is written anew: mesh (blockMesh, topoSet, subsetMesh), initial fields, porous
+    zones, controls, the decomposition for ``s.ranks`` > 1, then the cell map and the case record
+    last, so a case killed while being prepared is never taken for a prepared one. The iteration
+    the solve starts from is recorded too."""
+    key = "" if inputs is None else case_key(s, inputs, record_flow_rate=record_flow_rate,
+                                               preserve_volume=preserve_volume,
+                                               resistance=resistance is not None)
+    start = resume_point(work, key) if key and resume else None
+    if start is not None:
+        prep = load_prepared(work, s, key)
+        keep_earlier_log(prep.work)
+        _write_record(prep.work / CASE_DIR, key, prep.wall_times_s, start)
+        return dataclasses.replace(prep, start_iteration=start)
     lat = make_lattice(s)
     work = work.resolve()
     case = work / CASE_DIR
     shutil.rmtree(case, ignore_errors=True)
+    (work / EARLIER_LOG).unlink(missing_ok=True)
     shutil.copytree(template_dir(), case)
     (case / "0").mkdir(exist_ok=True)
     for f in (case / "0.orig").iterdir():
@@ -432,12 +588,8 @@ def run_case(
     _set_controls(case, s, lat, record_flow_rate)
     times: dict[str, float] = {}
 
-    def tool(cmd: list[str], name: str, ranks: int = 1, progress: object = None) -> None:
-        res = run(
-            cmd, work / f"log.{name}", cwd=case, ranks=ranks, progress=progress,  # type: ignore[arg-type]
-            oversubscribe=oversubscribe, description=name, show_progress=show_progress,
-        )  # fmt: skip
-        times[name] = res.elapsed_s
+    def tool(cmd: list[str], name: str) -> None:
+        _tool(work, case, cmd, name, times, oversubscribe=oversubscribe, show_progress=show_progress)
 
     tool(["blockMesh"], "blockMesh")
     tool(["postProcess", "-func", "writeCellCentres", "-time", "0"], "writeCellCentres")
@@ -481,33 +633,93 @@ def run_case(
     for stale in case.glob("processor*"):
         shutil.rmtree(stale)
     shutil.rmtree(case / "postProcessing", ignore_errors=True)
-    progress = openfoam_progress(0.0, float(s.max_iterations))
     if s.ranks > 1:
         tool(["decomposePar", "-force"], "decomposePar")
-        tool(["simpleFoam", "-parallel"], "simpleFoam", ranks=s.ranks, progress=progress)
-        tool(["reconstructPar", "-latestTime"], "reconstructPar")
-    else:
-        tool(["simpleFoam"], "simpleFoam", progress=progress)
+    tmp_map = case / f"{CASE_MAP}.in_progress.npz"
+    np.savez(tmp_map, fi=fi, fj=fj, fk=fk, z_centres=z_centres, frac=frac)
+    tmp_map.replace(case / CASE_MAP)
+    _write_record(case, key, times, 0)
+    return PreparedCase(work, lat, z_centres, (fi, fj, fk), frac, times)
+
+
+def run_case(
+    s: BoxSetup,
+    solid_fraction: SolidFraction,
+    work: Path,
+    *,
+    record_flow_rate: bool = False,
+    preserve_volume: bool = False,
+    resistance: SolidFraction | None = None,
+    oversubscribe: bool = False,
+    show_progress: bool | None = None,
+    inputs: Mapping[str, str] | None = None,
+    resume: bool = False,
+) -> CaseResult:
+    """Mesh, solve and read back one case in ``work`` (``work/case`` is replaced; logs
+    ``work/log.<tool>``): :func:`prepare_or_resume`, the solver, :func:`collect_case`.
+    ``record_flow_rate`` adds the per-iteration outflow history; ``preserve_volume`` removes the
+    cells of :func:`volume_preserving` instead of those with solid fraction >= 1/2;
+    ``resistance`` gives the Darcy resistance 1/k [1/m^2] of each zone cell (sub-grid solid),
+    applied by :func:`_write_porous_zones`; ``inputs``, ``resume``: continue a killed solve of the
+    same inputs from its latest complete time directory instead of starting over."""
+    prep = prepare_or_resume(s, solid_fraction, work, inputs=inputs, resume=resume,
+                             record_flow_rate=record_flow_rate, preserve_volume=preserve_volume,
+                             resistance=resistance, oversubscribe=oversubscribe, show_progress=show_progress)
+    prog = solver_program(prep.work, s.ranks, s.max_iterations)
+    times = dict(prep.wall_times_s)
+    _tool(prep.work, prog.cwd, list(prog.argv), "simpleFoam", times, ranks=prog.ranks, progress=prog.progress,
+          oversubscribe=oversubscribe, show_progress=show_progress)
+    return collect_case(s, prep, times, record_flow_rate=record_flow_rate,
+                        oversubscribe=oversubscribe, show_progress=show_progress)
+
+
+def keep_earlier_log(work: Path) -> None:
+    """Append the solver log of the killed run to EARLIER_LOG (the resumed run writes a new one)."""
+    log = work / "log.simpleFoam"
+    if log.is_file():
+        with open(work / EARLIER_LOG, "a", encoding="utf-8", errors="replace") as out:
+            out.write(log.read_text(errors="replace"))
+            out.write("\n// ---- killed here; resumed from the latest complete time directory ----\n")
+        log.unlink()
+
+
+_CLOCK = re.compile(r"ClockTime = ([0-9.eE+-]+) s")
+
+
+def solver_wall_time(work: Path) -> float:
+    """Wall time of the solver from its log (the last ``ClockTime``, whole seconds), for a solve
+    run outside fiberform (a batch job's program line); 0 when the log has none."""
+    found = _CLOCK.findall((work / "log.simpleFoam").read_text(errors="replace"))
+    return float(found[-1]) if found else 0.0
+
+
+def collect_case(s: BoxSetup, prep: PreparedCase, times: dict[str, float], *, record_flow_rate: bool = False,
+                 oversubscribe: bool = False, show_progress: bool | None = None) -> CaseResult:
+    """Read back a solved case: reconstructPar (ranks > 1), the solver log (iterations,
+    convergence, final residuals), the latest time directory and the outflow history."""
+    work, case, lat = prep.work, prep.work / CASE_DIR, prep.lattice
+    if s.ranks > 1:
+        _tool(work, case, ["reconstructPar", "-latestTime"], "reconstructPar", times,
+              oversubscribe=oversubscribe, show_progress=show_progress)
     log = (work / "log.simpleFoam").read_text(errors="replace")
     m = _CONVERGED.search(log)
     steps = [int(t) for t in _TIME.findall(log)]
-    iterations = int(m.group(1)) if m else (steps[-1] if steps else 0)
+    iterations = int(m.group(1)) if m else (steps[-1] if steps else prep.start_iteration)
     residuals: dict[str, float] = {}
     for name, val in _RESIDUAL.findall(log):
         residuals[name] = float(val)
-    times_dirs = sorted(
-        (d for d in case.iterdir() if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
-        key=lambda d: float(d.name),
-    )
+    times_dirs = sorted(_time_dirs(case).items())
     if not times_dirs:
         raise StageError(f"simpleFoam wrote no solution in {case}")
-    last = times_dirs[-1]
+    last = times_dirs[-1][1]
+    fi, fj, fk = prep.cell_index
+    n = len(fi)
     U = _read_internal(last / "U").reshape(-1, 3)
     p = _read_internal(last / "p").ravel()
     if p.size == 1:
-        p = np.full(len(Cf), float(p[0]))
+        p = np.full(n, float(p[0]))
     if U.shape[0] == 1:
-        U = np.repeat(U, len(Cf), axis=0)
+        U = np.repeat(U, n, axis=0)
     q_top = -_patch_sum(last / "phi", "top")
     q_bottom = _patch_sum(last / "phi", "bottom")
     Ul = np.zeros((lat.nx, lat.ny, lat.nz, 3))
@@ -519,24 +731,26 @@ def run_case(
     fluid[idx] = True
     hist_it, hist_q = _read_flow_rate_history(case) if record_flow_rate else (
         np.zeros(0, np.int64), np.zeros(0))  # fmt: skip
+    hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
     return CaseResult(
         lattice_x=(np.arange(lat.nx) + 0.5) * hx,
         lattice_y=(np.arange(lat.ny) + 0.5) * hy,
-        lattice_z=z_centres,
+        lattice_z=prep.z_centres,
         U=Ul,
         p=pl,
         fluid=fluid,
-        solid_fraction=frac,
+        solid_fraction=prep.solid_fraction,
         q_top_m3_s=q_top,
         q_bottom_m3_s=q_bottom,
         iterations=iterations,
         converged=m is not None,
-        fluid_cells=int(len(Cf)),
+        fluid_cells=int(n),
         lattice_cells=lat.cells,
         wall_times_s=times,
         final_residuals=residuals,
         history_iteration=hist_it,
         history_q_bottom_m3_s=hist_q,
+        resumed_from_iteration=prep.start_iteration,
     )
 
 
@@ -553,6 +767,7 @@ def write_solver_record(group: Any, s: BoxSetup, res: CaseResult) -> None:
     group.attrs["lattice_cells"] = res.lattice_cells
     group.attrs["fluid_cells"] = res.fluid_cells
     group.attrs["ranks"] = s.ranks
+    group.attrs["resumed_from_iteration"] = res.resumed_from_iteration
     for k, v in res.wall_times_s.items():
         group.attrs[f"wall_time_{k}_s"] = v
     for k, v in res.final_residuals.items():

@@ -26,7 +26,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from rich.console import Console
@@ -44,6 +44,7 @@ from .errors import ConfigError, RunError
 
 __all__ = [
     "OPENFOAM_PROJECT_DIR",
+    "Program",
     "ProgressParser",
     "RunResult",
     "build_command",
@@ -58,6 +59,20 @@ OPENFOAM_PROJECT_DIR = "/usr/share/openfoam"
 
 #: Reads one log line; returns the fraction done (0..1) or None if the line says nothing about it.
 ProgressParser = Callable[[str], float | None]
+
+
+@dataclass(frozen=True)
+class Program:
+    """One external program line of a stage: ``argv`` run in ``cwd`` on ``ranks`` MPI ranks
+    (``mpirun -np`` when > 1), standard output and error to ``log`` (absolute paths). :func:`run`
+    starts it locally; a batch script carries it as a shell line (fiberform.executors)."""
+
+    argv: tuple[str, ...]
+    ranks: int
+    cwd: Path
+    log: Path
+    #: progress from the log lines, for the local progress bar only
+    progress: ProgressParser | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)

@@ -27,14 +27,14 @@ from typing import Any
 
 import yaml
 
-from . import __version__
+from . import __version__, executors
 from .errors import ConfigError, FiberformError
-from .pipeline import applicable_stages, plan_run, run_pipeline
+from .pipeline import StageGraph, applicable_stages, plan_run, run_pipeline
 from .provenance import atomic_write_text, file_hash, read_provenance
 from .scene import load_scene, parse_scene, read_scene_yaml
 from .stages import StageContext
 
-__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "write_sweep"]
+__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "submit_sweep", "write_sweep"]
 
 SWEEP_JSON, COLLECT_CSV, COLLECT_PNG = "sweep.json", "collect.csv", "collect.png"
 #: fields a sweep sets itself
@@ -137,7 +137,7 @@ def write_sweep(base_path: Path, sweep_dir: Path, variants: Sequence[Variant],
         shutil.copyfile(src, dst)
     files = []
     for v in variants:
-        f = scenes / f"{v.name}.yaml"
+        f = variant_path(sweep_dir, v)
         header = (f"# fiberform sweep variant of {base_path} (fiberform {__version__}); "
                   f"values: {json.dumps(v.values)}; seed {v.seed}\n")
         atomic_write_text(f, header + yaml.safe_dump(v.data, sort_keys=False))
@@ -171,6 +171,57 @@ def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: s
             echo(f"variant {f.stem} FAILED: {exc}")
             failed.append(f.stem)
     return failed
+
+
+def variant_path(sweep_dir: Path, v: Variant) -> Path:
+    """The scene file of variant ``v``."""
+    return sweep_dir / "scenes" / f"{v.name}.yaml"
+
+
+def submit_sweep(opts: executors.BatchOptions, base_path: Path, sweep_dir: Path, variants: Sequence[Variant],
+                 sets: Sequence[tuple[str, list[Any]]], build_dir: Path, start: str | None, stop: str | None,
+                 *, dry_run: bool, echo: Callable[[str], None]) -> int:
+    """``fiberform sweep --submit``: one job array per selected stage over the variants
+    (:func:`fiberform.executors.plan_array_jobs`), scripts and ``variants.txt`` in
+    ``<sweep dir>/jobs/``, array job IDs in its ``jobs.json`` and task k's ID in variant k's own
+    job records (``fiberform status VARIANT``). Everything is checked before anything is written."""
+    workdir = Path.cwd()
+    sweep_abs = (workdir / sweep_dir).resolve()
+    graphs = []
+    for v in variants:
+        scene = parse_scene(v.data, f"variant {v.name}")
+        ctx = StageContext(scene=scene, scene_path=(workdir / variant_path(sweep_dir, v)).absolute(),
+                           build_dir=build_dir)
+        graphs.append(StageGraph(applicable_stages(scene), ctx))
+    jobs_folder = executors.jobs_dir(sweep_abs)
+    records = executors.read_records(sweep_abs)
+    states = executors.queue_states(records) if records else {}
+    specs, listing = executors.plan_array_jobs(
+        graphs, opts, start=start, stop=stop, sweep_name=f"{load_scene(base_path).name[:40]}_sweep",
+        base_scene=(workdir / base_path).resolve(), jobs_folder=jobs_folder, workdir=workdir,
+        python=executors.default_python(), states=states)
+    if not dry_run:
+        executors.check_submit_program(opts)
+    files = write_sweep(base_path, sweep_dir, variants, sets)
+    echo(f"sweep: {len(files)} variant(s) in {sweep_dir} (record {sweep_dir / SWEEP_JSON})")
+    jobs_folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(jobs_folder / executors.VARIANTS_NAME, listing)
+    replay = executors.write_scripts(opts, specs, workdir)
+    if dry_run:
+        for s in specs:
+            echo(f"==> {s.script} <==\n{s.text}")
+        echo(f"sweep: dry run: {len(specs)} array script(s) written, nothing submitted; {replay} submits them")
+        return 0
+    made = executors.submit_jobs(opts, specs, sweep_abs, workdir)
+    executors.record_array_tasks(opts, made, [g.ctx.scene.output_path if g.ctx.scene.output_path.is_absolute()
+                                              else workdir / g.ctx.scene.output_path for g in graphs])
+    for rec in made:
+        after = f" after {':'.join(rec.after)}" if rec.after else ""
+        echo(f"{rec.stage}: {rec.scheduler} job array {rec.job_id} ({len(graphs)} tasks){after} ({rec.script})")
+    echo(f"sweep: {len(made)} job array(s) recorded in {jobs_folder / executors.RECORDS_NAME}; `fiberform status "
+         f"{variant_path(sweep_dir, variants[0])}` shows a variant's stages, `fiberform collect {sweep_dir}` "
+         "tabulates the finished ones")
+    return 0
 
 
 def _read_record(sweep_dir: Path) -> dict[str, Any]:

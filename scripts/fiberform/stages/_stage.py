@@ -18,6 +18,16 @@ interrupted run leaves it saying ``failed`` with the error; a successful run rem
 file records the stage's wall time (``elapsed_s``). ``fiberform status`` reads both
 (:mod:`fiberform.pipeline`). A stage declares the upstream products it reads in :meth:`Stage.needs`;
 the pipeline order follows from those declarations.
+
+A stage that runs an external program splits its work in three (``splits``): :meth:`Stage.prepare`
+writes the program's inputs, :meth:`Stage.programs` names the program lines (arguments, MPI ranks,
+folder, log; from the scene alone, so a batch script can carry them before anything ran) and
+:meth:`Stage.collect` reads the outputs and writes the products. ``fiberform run`` does the three in
+one process (:meth:`Stage.produce`, through :func:`fiberform.runner.run`: progress bar, SIGTERM
+handling); a batch job runs ``fiberform prepare STAGE SCENE`` (:meth:`Stage.execute_prepare`), the
+program lines themselves and ``fiberform collect STAGE SCENE`` (:meth:`Stage.execute_collect`).
+Stages without an external program (generate, fabric) have no program lines and implement
+:meth:`Stage.produce` themselves.
 """
 
 from __future__ import annotations
@@ -28,14 +38,14 @@ import json
 import os
 import socket
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
 import h5py
 
-from ..errors import SceneError
+from ..errors import ConfigError, SceneError, StageError
 from ..provenance import (
     atomic_write_text,
     file_hash,
@@ -44,12 +54,15 @@ from ..provenance import (
     text_hash,
     write_provenance,
 )
+from ..runner import Program, run
 from ..scene import Scene, section_hash
 
-__all__ = ["STATE_NAME", "Outcome", "Stage", "StageContext"]
+__all__ = ["STATE_NAME", "Outcome", "Program", "Stage", "StageContext", "resumes"]
 
 #: Run-state file in a stage folder (running / failed); absent after a successful run.
 STATE_NAME = "stage-state.json"
+#: Written by ``fiberform prepare``: the input hashes the stage folder was prepared from.
+PREPARED_NAME = "prepared.json"
 
 
 @dataclass
@@ -96,6 +109,8 @@ class Stage(abc.ABC):
     code_version: ClassVar[int] = 1
     #: Programs in ``<build_dir>/bin`` the stage runs (hashed as inputs).
     binaries: ClassVar[tuple[str, ...]] = ()
+    #: True when the stage is split into prepare / programs / collect (see the module docstring).
+    splits: ClassVar[bool] = False
 
     # -- paths ---------------------------------------------------------------------------------
 
@@ -177,14 +192,46 @@ class Stage(abc.ABC):
             return False
         return prov.get("stage") == self.name and prov.get("input_hashes") == dict(hashes)
 
-    # -- running -------------------------------------------------------------------------------
+    # -- running: prepare, programs, collect (the split), produce, execute ---------------------
 
-    @abc.abstractmethod
+    def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:  # noqa: B027 - optional
+        """Write the inputs of the stage's programs into the stage folder (split stages)."""
+
+    def programs(self, ctx: StageContext) -> list[Program]:
+        """The program lines of the stage, in order, from the scene alone (absolute paths); none by
+        default."""
+        return []
+
+    def log_key(self, ctx: StageContext, log: Path) -> str:
+        """The key of a program's wall time in :meth:`collect`: its ``log`` relative to the stage
+        folder (``log.simpleFoam``)."""
+        d, log = self.stage_dir(ctx).resolve(), log.resolve()
+        return str(log.relative_to(d)) if log.is_relative_to(d) else str(log)
+
+    def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
+                wall_times: Mapping[str, float]) -> None:
+        """Read the programs' outputs and write the products as :meth:`produce` does;
+        ``wall_times``: seconds per program (:meth:`log_key`) as measured by fiberform (empty when a
+        batch job ran them)."""
+        raise NotImplementedError(f"stage {self.name} is not split into prepare / programs / collect")
+
     def produce(
         self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str]
     ) -> None:
         """Do the work. Write datasets into ``h5`` (provenance is already on its root) and the
-        other products to ``tmp[name]`` (their ``.in_progress`` paths)."""
+        other products to ``tmp[name]`` (their ``.in_progress`` paths). The default (split stages):
+        :meth:`prepare`, each of :meth:`programs` through :func:`fiberform.runner.run`,
+        :meth:`collect`."""
+        if not self.splits:
+            raise NotImplementedError(f"stage {self.name} implements neither produce nor the split")
+        self.prepare(ctx, hashes)
+        times: dict[str, float] = {}
+        for prog in self.programs(ctx):
+            res = run(list(prog.argv), prog.log, cwd=prog.cwd, ranks=prog.ranks, progress=prog.progress,
+                      oversubscribe=ctx.oversubscribe, description=prog.log.name.removeprefix("log."),
+                      show_progress=ctx.show_progress)
+            times[self.log_key(ctx, prog.log)] = res.elapsed_s
+        self.collect(ctx, h5, tmp, hashes, times)
 
     def execute(self, ctx: StageContext) -> Outcome:
         start = time.monotonic()
@@ -194,22 +241,88 @@ class Stage(abc.ABC):
             return Outcome(self.name, True, self.product_paths(ctx), time.monotonic() - start,
                            "up to date")  # fmt: skip
         self.preflight(ctx)
-        paths = self.product_paths(ctx)
-        stage_dir = self.stage_dir(ctx)
-        stage_dir.mkdir(parents=True, exist_ok=True)
-        state = self.state_path(ctx)
+        started = self._begin(ctx, os.getpid())
+        self._write_products(ctx, hashes, started, start,
+                             lambda h5, tmp: self.produce(ctx, h5, tmp, hashes))
+        return Outcome(self.name, False, self.product_paths(ctx), time.monotonic() - start, "done")
+
+    def execute_prepare(self, ctx: StageContext) -> bool:
+        """``fiberform prepare``: the first part of a batch job. False (nothing written) when the
+        products are up to date; else the stage folder is prepared for :meth:`programs` and marked
+        running for the batch job (the parent process: the job script)."""
+        self._split_only()
+        self.validate(ctx)
+        hashes = self.input_hashes(ctx)
+        if not ctx.force and self.up_to_date(ctx, hashes):
+            return False
+        self.preflight(ctx)
+        started = self._begin(ctx, os.getppid())
+        prepared = self.stage_dir(ctx) / PREPARED_NAME
+        prepared.unlink(missing_ok=True)
+        try:
+            self.prepare(ctx, hashes)
+        except BaseException as exc:
+            self._failed(ctx, started, exc)
+            raise
+        atomic_write_text(prepared, json.dumps({"stage": self.name, "input_hashes": dict(hashes)}) + "\n")
+        return True
+
+    def execute_collect(self, ctx: StageContext) -> Outcome:
+        """``fiberform collect``: the last part of a batch job, after the program lines; the stage
+        folder must be prepared from the inputs of now."""
+        self._split_only()
+        start = time.monotonic()
+        self.validate(ctx)
+        hashes = self.input_hashes(ctx)
+        prepared = self.stage_dir(ctx) / PREPARED_NAME
+        try:
+            rec = json.loads(prepared.read_text())
+        except (OSError, ValueError):
+            raise StageError(f"{prepared}: missing or unreadable; run `fiberform prepare {self.name} SCENE` "
+                             "and the program lines first") from None
+        if rec.get("input_hashes") != dict(hashes):
+            raise StageError(f"{self.stage_dir(ctx)}: prepared from other inputs than the scene's now; "
+                             f"prepare it again (`fiberform prepare {self.name} SCENE`)")
         started = _now()
-        atomic_write_text(state, json.dumps({"state": "running", "stage": self.name, "pid": os.getpid(),
-                                             "host": socket.gethostname(), "started_utc": started}) + "\n")
-        for p in paths:
+        self._write_products(ctx, hashes, started, start,
+                             lambda h5, tmp: self.collect(ctx, h5, tmp, hashes, {}))
+        prepared.unlink(missing_ok=True)
+        return Outcome(self.name, False, self.product_paths(ctx), time.monotonic() - start, "done")
+
+    def _split_only(self) -> None:
+        if not self.splits:
+            raise ConfigError(f"stage {self.name} runs in one step (`fiberform {self.name} SCENE`): it is not "
+                             "split into prepare / program lines / collect")
+
+    def _begin(self, ctx: StageContext, pid: int) -> str:
+        """Create the stage folder, mark it running (``pid``) and remove the old products."""
+        self.stage_dir(ctx).mkdir(parents=True, exist_ok=True)
+        started = _now()
+        atomic_write_text(self.state_path(ctx), json.dumps({
+            "state": "running", "stage": self.name, "pid": pid, "host": socket.gethostname(),
+            "started_utc": started}) + "\n")
+        for p in self.product_paths(ctx):
             p.unlink(missing_ok=True)
+        return started
+
+    def _failed(self, ctx: StageContext, started: str, exc: BaseException) -> None:
+        reason = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else (str(exc) or type(exc).__name__)
+        atomic_write_text(self.state_path(ctx), json.dumps({"state": "failed", "stage": self.name,
+                                                            "started_utc": started, "failed_utc": _now(),
+                                                            "error": reason[:2000]}) + "\n")
+
+    def _write_products(self, ctx: StageContext, hashes: Mapping[str, str], started: str, start: float,
+                        work: Callable[[h5py.File, Mapping[str, Path]], None]) -> None:
+        """Run ``work`` on the ``.in_progress`` products (the HDF5 file with provenance) and rename
+        them (the HDF5 file last); on failure delete them and mark the stage failed."""
+        paths = self.product_paths(ctx)
         tmp = {p.name: in_progress_path(p) for p in paths}
         try:
             for t in tmp.values():
                 t.unlink(missing_ok=True)
             with h5py.File(tmp[paths[0].name], "w") as h5:
                 write_provenance(h5, self.name, ctx.scene, hashes, ctx.options)
-                self.produce(ctx, h5, tmp, hashes)
+                work(h5, tmp)
                 h5.attrs["elapsed_s"] = time.monotonic() - start
             for p in paths[1:]:
                 tmp[p.name].replace(p)
@@ -217,12 +330,16 @@ class Stage(abc.ABC):
         except BaseException as exc:
             for t in tmp.values():
                 t.unlink(missing_ok=True)
-            reason = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else (str(exc) or type(exc).__name__)
-            atomic_write_text(state, json.dumps({"state": "failed", "stage": self.name, "started_utc": started,
-                                                 "failed_utc": _now(), "error": reason[:2000]}) + "\n")
+            self._failed(ctx, started, exc)
             raise
-        state.unlink(missing_ok=True)
-        return Outcome(self.name, False, paths, time.monotonic() - start, "done")
+        self.state_path(ctx).unlink(missing_ok=True)
+
+
+def resumes(ctx: StageContext) -> bool:
+    """Whether an OpenFOAM stage continues a killed solve of the same inputs (its case directory
+    must hold a case prepared from the input hashes of this run): unless forced (``--force``
+    starts over; ``--force --resume`` resumes)."""
+    return not ctx.force or bool(ctx.options.get("resume"))
 
 
 def _now() -> str:

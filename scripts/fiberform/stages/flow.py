@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 import struct
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,14 +45,14 @@ import numpy.typing as npt
 from ..errors import StageError
 from ..fabric_geometry import VoxelImage
 from ..openfoam_case import (
-    BoxSetup, CaseResult, Lattice, SolidFraction, plot_section, run_case, template_hash,
-    write_solver_record,
+    BoxSetup, CaseResult, Lattice, SolidFraction, collect_case, load_prepared, plot_section,
+    prepare_or_resume, run_case, solver_program, solver_wall_time, template_hash, write_solver_record,
 )  # fmt: skip
 from ..porous_media import capsule_fraction, image_fraction
 from ..products import FABRIC_H5, read_fabric_image, read_yarn_chains
 from ..provenance import write_dataset
 from ..scene import FlowSection, FluidSection, Scene
-from ._stage import Stage, StageContext
+from ._stage import Program, Stage, StageContext, resumes
 
 __all__ = [
     "FlowResult",
@@ -127,13 +126,16 @@ def run_flow_case(
     yarns: Sequence[tuple[FloatArray, float]] = (),
     oversubscribe: bool = False,
     show_progress: bool | None = None,
+    inputs: Mapping[str, str] | None = None,
+    resume: bool = False,
 ) -> FlowResult:
     """Mesh, solve and read back one flow case through the bare fabric in ``work``: the yarns
     ``yarns`` (generated fabric) or the voxel image ``img`` (imported fabric, ``yarns`` empty),
-    removed by :func:`fabric_solid` and the volume-preserving rule."""
+    removed by :func:`fabric_solid` and the volume-preserving rule. ``inputs``, ``resume``: resume
+    a killed solve of the same inputs (:func:`fiberform.openfoam_case.run_case`)."""
     return run_case(
         s, fabric_solid(img, yarns), work, preserve_volume=True, oversubscribe=oversubscribe,
-        show_progress=show_progress,
+        show_progress=show_progress, inputs=inputs, resume=resume,
     )  # fmt: skip
 
 
@@ -272,6 +274,7 @@ class FlowStage(Stage):
     uses = ("fabric", "flow", "fluid")
     products = (H5_NAME, GRID_NAME, PNG_NAME)
     code_version = 2  # 2: the permeability stage's solid (yarn capsules, volume-preserving removal)
+    splits = True
 
     def check_scene(self, scene: Scene) -> list[str]:
         problems = super().check_scene(scene)
@@ -323,31 +326,50 @@ class FlowStage(Stage):
     def needs(self, ctx: StageContext) -> dict[str, Path]:
         return {"fabric_h5": ctx.scene.output_path / FABRIC_H5}
 
+    def metrics(self, ctx: StageContext) -> dict[str, float]:
+        with h5py.File(self.product_paths(ctx)[0], "r") as h5:
+            return {"flow_superficial_velocity_m_s": float(h5["flow_rate/superficial_velocity"][()]),
+                    "flow_iterations": float(h5["solver"].attrs["iterations"])}
+
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
         hashes["case_template"] = template_hash()
         return hashes
 
-    def produce(
-        self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str]
-    ) -> None:
+    def setup(self, ctx: StageContext) -> tuple[FlowSetup, VoxelImage, list[tuple[FloatArray, float]]]:
+        """The case setup, the fabric image and the yarns (centre line, radius) from fabric.h5."""
         fab_path = self.needs(ctx)["fabric_h5"]
         if not fab_path.is_file():
             raise StageError(f"flow needs {fab_path}: run `fiberform fabric` first")
         flow = ctx.scene.flow
         assert flow is not None
-        fluid = ctx.scene.fluid or FluidSection()
         img = read_fabric_image(fab_path)
-        s = FlowSetup.from_scene(img, flow, fluid)
-        start = time.monotonic()
-        yarns = [(c.points, c.radius) for c in read_yarn_chains(fab_path)]
-        res = run_flow_case(
-            s, img, self.stage_dir(ctx), yarns=yarns, oversubscribe=ctx.oversubscribe,
-            show_progress=ctx.show_progress,
-        )  # fmt: skip
+        s = FlowSetup.from_scene(img, flow, ctx.scene.fluid or FluidSection())
+        return s, img, [(c.points, c.radius) for c in read_yarn_chains(fab_path)]
+
+    def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        s, img, yarns = self.setup(ctx)
+        prepare_or_resume(s, fabric_solid(img, yarns), self.stage_dir(ctx), inputs=hashes, resume=resumes(ctx),
+                          preserve_volume=True, oversubscribe=ctx.oversubscribe,
+                          show_progress=ctx.show_progress)
+
+    def programs(self, ctx: StageContext) -> list[Program]:
+        flow = ctx.scene.flow
+        assert flow is not None
+        return [solver_program(self.stage_dir(ctx), flow.ranks, flow.max_iterations)]
+
+    def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
+                wall_times: Mapping[str, float]) -> None:
+        s, _, _ = self.setup(ctx)
+        work = self.stage_dir(ctx)
+        prep = load_prepared(work, s)
+        key = self.log_key(ctx, work / "log.simpleFoam")
+        solve = wall_times[key] if key in wall_times else solver_wall_time(work)
+        times = {**prep.wall_times_s, "simpleFoam": solve}
+        res = collect_case(s, prep, times, oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress)
         grid, Ug, pg = sample_grid(res, s)
         write_flow_h5(h5, s, res, grid, Ug, pg)
-        h5["solver"].attrs["wall_time_total_s"] = time.monotonic() - start
+        h5["solver"].attrs["wall_time_total_s"] = sum(res.wall_times_s.values())
         write_flow_grid(tmp[GRID_NAME], grid, Ug)
         area = s.size_x_m * s.size_y_m
         title = (

@@ -25,7 +25,6 @@ import json
 import math
 import re
 import shutil
-import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -43,12 +42,12 @@ from ..fiber_sheet import (
 from ..inputs import (
     LiggghtsInput, dump_format, file_token, fix_ref, jump_if_at_least, step_file_token,
 )
-from ..liggghts_log import read_dump
-from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5
+from ..liggghts_log import read_dump, total_wall_time
+from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
 from ..provenance import atomic_write_text, file_hash, write_dataset
-from ..runner import liggghts_progress, run
+from ..runner import liggghts_progress
 from ..scene import FluidSection, Scene
-from ._stage import Outcome, Stage, StageContext
+from ._stage import Outcome, Program, Stage, StageContext
 
 __all__ = ["Laydown", "build_input", "sheet_thickness"]
 
@@ -60,6 +59,8 @@ RESTART_STEM, RESTART_EXT = "laydown", "restart"  # restart files laydown.<step>
 _RESTART = re.compile(r"laydown\.(\d+)\.restart")
 _SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
 EARLIER_LOG, RESUME_STATE = "log.earlier", "resume.json"
+#: Written by prepare: the step the run starts from (null: a fresh run), read by collect.
+PREPARED_STEP = "prepared-step.json"
 SHEET_RESTART, SETTLED_LABEL = "sheet.restart", "laydown_end"
 
 
@@ -180,6 +181,7 @@ class Laydown(Stage):
     products = (H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME, SHEET_RESTART)
     binaries = ("fiberdem",)
     code_version = 2
+    splits = True
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
@@ -249,11 +251,11 @@ class Laydown(Stage):
         if not (ctx.build_dir / "bin" / "fiberdem").is_file():
             raise StageError(f"{ctx.build_dir / 'bin' / 'fiberdem'} not found: build first")
 
-    def produce(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path],
-                hashes: Mapping[str, str]) -> None:
+    def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        """The working folder: fresh (fibers.data, fibers.nodes, flow.grid copied in) or, with
+        ``--resume``, the killed run's cut back to its last complete restart file; yarns.txt and
+        the input script; the start step in PREPARED_STEP."""
         scene = ctx.scene
-        ld, f, dom = scene.laydown, scene.fibers, scene.domain
-        assert ld is not None and f is not None and dom is not None
         paths = self.needs(ctx)
         work = self.stage_dir(ctx) / "work"
         resume_step = resume_point(work, hashes) if ctx.options.get("resume") else None
@@ -267,7 +269,29 @@ class Laydown(Stage):
             atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
         else:
             prepare_resume(work, resume_step)
-        yarns = write_yarns(work / YARNS_NAME, paths["fabric_h5"])
+        write_yarns(work / YARNS_NAME, paths["fabric_h5"])
+        (work / INPUT_NAME).write_text(render_input(scene, self._superficial_velocity(ctx), resume_step))
+        atomic_write_text(work / PREPARED_STEP, json.dumps({"resume_step": resume_step}) + "\n")
+
+    def _superficial_velocity(self, ctx: StageContext) -> float:
+        with h5py.File(ctx.scene.output_path / FLOW_H5, "r") as fh:
+            return float(fh["flow_rate/superficial_velocity"][()])
+
+    def programs(self, ctx: StageContext) -> list[Program]:
+        argv, ranks = launch(ctx.scene, ctx.build_dir)
+        steps_per_check, checks = run_lengths(ctx.scene)
+        work = (self.stage_dir(ctx) / "work").resolve()
+        return [Program(tuple(argv), ranks, work, work / LOG_NAME, liggghts_progress(steps_per_check * checks))]
+
+    def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
+                wall_times: Mapping[str, float]) -> None:
+        scene = ctx.scene
+        ld, f, dom = scene.laydown, scene.fibers, scene.domain
+        assert ld is not None and f is not None and dom is not None
+        paths = self.needs(ctx)
+        work = self.stage_dir(ctx) / "work"
+        resume_step = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
+        yarns = read_yarns(paths["fabric_h5"])
         pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
         with h5py.File(paths["fibers_h5"], "r") as fh:
             f_off = np.asarray(fh["fibers/offsets"][...], dtype=np.int64)
@@ -275,17 +299,10 @@ class Laydown(Stage):
             x0 = np.asarray(fh["fibers/x"][...], dtype=float)
             f_radii = np.asarray(fh["fibers/radii"][...], dtype=float)
         steps_per_check, checks = run_lengths(scene)
-        with h5py.File(ctx.scene.output_path / FLOW_H5, "r") as fh:
-            u_s = float(fh["flow_rate/superficial_velocity"][()])
+        u_s = self._superficial_velocity(ctx)
         v_settle = settle_speed(scene, u_s)
-        (work / INPUT_NAME).write_text(render_input(scene, u_s, resume_step))
-        t0 = time.monotonic()
-        argv, ranks = launch(scene, ctx.build_dir)
-        run(argv, Path(LOG_NAME), cwd=work, ranks=ranks,
-            progress=liggghts_progress(steps_per_check * checks - (resume_step or 0)),
-            oversubscribe=ctx.oversubscribe, description="fiberdem laydown",
-            show_progress=ctx.show_progress)
-        wall = time.monotonic() - t0
+        key = self.log_key(ctx, work / LOG_NAME)
+        wall = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
         earlier = work / EARLIER_LOG
         log = ((earlier.read_text(errors="replace") if earlier.is_file() else "")
                + (work / LOG_NAME).read_text(errors="replace"))

@@ -27,13 +27,13 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import StageError
+from ..errors import ConfigError, StageError
 from ..inputs import STAR, LiggghtsInput, dump_format, file_token
-from ..liggghts_log import Frame, read_dump
+from ..liggghts_log import Frame, read_dump, total_wall_time
 from ..provenance import text_hash, write_dataset
-from ..runner import build_command, liggghts_progress, run
+from ..runner import Program, build_command, liggghts_progress
 from ..scene import DemoParticlesSection, RunSection, Scene
-from ._stage import Stage, StageContext
+from ._stage import Program, Stage, StageContext
 
 __all__ = ["DemoParticles", "Frame", "TwoSphereCollision", "build_input", "read_dump"]
 
@@ -220,6 +220,7 @@ class DemoParticles(Stage):
     uses = ("seed", "run", "demo_particles")
     products = ("particles.h5", "report.md")
     binaries = ("fiberdem",)
+    splits = True
 
     def check_scene(self, scene: Scene) -> list[str]:
         return super().check_scene(scene) + check_collision(scene)
@@ -244,31 +245,32 @@ class DemoParticles(Stage):
         hashes[INPUT_NAME] = text_hash(build_input(ctx.scene))
         return hashes
 
-    def produce(
-        self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str]
-    ) -> None:
+    def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        work = self.stage_dir(ctx)
+        (work / INPUT_NAME).write_text(build_input(ctx.scene))
+        for stale in (TRAJ_DUMP, FINAL_DUMP):
+            (work / stale).unlink(missing_ok=True)
+
+    def programs(self, ctx: StageContext) -> list[Program]:
+        # LIGGGHTS' own log file is off (-log none): its screen output is the runner's log, so
+        # progress and the error tail come from one place.
+        work = self.stage_dir(ctx).resolve()
+        return [Program((str(self.fiberdem(ctx).resolve()), "-in", INPUT_NAME, "-log", "none"), ctx.scene.run.ranks,
+                        work, work / LOG_NAME, liggghts_progress(ctx.scene.run.steps))]
+
+    def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
+                wall_times: Mapping[str, float]) -> None:
         scene = ctx.scene
         d = scene.demo_particles
         assert d is not None
-        exe = self.fiberdem(ctx)
         work = self.stage_dir(ctx)
-        text = build_input(scene)
-        (work / INPUT_NAME).write_text(text)
-        for stale in (TRAJ_DUMP, FINAL_DUMP):
-            (work / stale).unlink(missing_ok=True)
-        # LIGGGHTS' own log file is off (-log none): its screen output is the runner's log, so
-        # progress and the error tail come from one place.
-        cmd = [str(exe.resolve()), "-in", INPUT_NAME, "-log", "none"]
-        result = run(
-            cmd,
-            Path(LOG_NAME),
-            cwd=work,
-            ranks=scene.run.ranks,
-            progress=liggghts_progress(scene.run.steps),
-            oversubscribe=ctx.oversubscribe,
-            description="fiberdem demo-particles",
-            show_progress=ctx.show_progress,
-        )
+        prog = self.programs(ctx)[0]
+        key = self.log_key(ctx, prog.log)
+        elapsed = wall_times[key] if key in wall_times else total_wall_time(prog.log.read_text(errors="replace"))
+        try:  # the command line as fiberform starts it (a batch job may have used a larger node)
+            cmd = build_command(list(prog.argv), prog.ranks, ctx.oversubscribe)
+        except ConfigError:
+            cmd = build_command(list(prog.argv), prog.ranks, oversubscribe=True)
         frames = read_dump(work / FINAL_DUMP)
         if len(frames) < 2 or frames[-1].step != scene.run.steps:
             raise StageError(f"{work / FINAL_DUMP} lacks the final frame (step {scene.run.steps})")
@@ -335,7 +337,7 @@ class DemoParticles(Stage):
             if m:
                 version = m.group(1)
                 break
-        report = _report(scene, c, list(result.cmd), result.elapsed_s, version,
+        report = _report(scene, c, cmd, elapsed, version,
                          x_end, v_end, x_exp, v_exp,
                          v_err, x_err, hashes)  # fmt: skip
         tmp["report.md"].write_text(report)

@@ -39,7 +39,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import shutil
-import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,8 +51,9 @@ from ..errors import ConfigError, StageError
 from ..fabric_geometry import VoxelImage
 from ..fiber_io import outer_half_axes
 from ..openfoam_case import (
-    BoxSetup, CaseResult, Lattice, SolidFraction, make_lattice, plot_section, run_case,
-    template_hash, write_solver_record,
+    BoxSetup, CaseResult, Lattice, SolidFraction, collect_case, load_prepared, make_lattice,
+    plot_section, prepare_or_resume, solver_program, solver_wall_time, template_hash,
+    write_solver_record,
 )  # fmt: skip
 from ..porous_media import (
     CFM_M_S, Convergence, chain_fraction, flow_rate_convergence, forchheimer_fit,
@@ -65,7 +65,7 @@ from ..products import (
 )  # fmt: skip
 from ..provenance import write_dataset
 from ..scene import PermeabilitySection, Scene
-from ._stage import Stage, StageContext
+from ._stage import Program, Stage, StageContext, resumes
 
 __all__ = [
     "Forchheimer", "PermeabilityGeometry", "PermeabilityStage", "case_setup",
@@ -211,6 +211,7 @@ class PermeabilityStage(Stage):
     uses = ("fabric", "fibers", "laydown", "permeability")
     products = (H5_NAME, REPORT_NAME, PNG_NAME)
     code_version = 2
+    splits = True
 
     #: the sheet this stage puts on the fabric (a product with /sheet/x, fiber_id, offsets)
     sheet_product = LAYDOWN_H5
@@ -323,9 +324,10 @@ class PermeabilityStage(Stage):
             law_radius_m=min(law_radius(c) for c in fibers) if fibers else None,
         )
 
-    def produce(
-        self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str]
-    ) -> None:
+    def cases(self, ctx: StageContext) -> tuple[PermeabilityGeometry, list[tuple[BoxSetup, Path]]]:
+        """The geometry and the cases (setup, folder): the scene's pressure drop in the stage
+        folder and, with ``forchheimer_pressure_drop_Pa``, the second point of the fit in its own
+        folder."""
         perm = ctx.scene.permeability
         assert perm is not None
         geo = self.geometry(ctx)
@@ -337,27 +339,50 @@ class PermeabilityStage(Stage):
                 f"permeability.max_cells = {perm.max_cells}); lower cells_across_fiber or raise "
                 "subgrid_cell_size_m"
             )
-        start = time.monotonic()
-        res = run_case(
-            s, solid_fraction(geo, perm), self.stage_dir(ctx), record_flow_rate=True,
-            preserve_volume=True, resistance=fiber_resistance(geo, perm),
-            oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
-        )  # fmt: skip
+        s2 = forchheimer_setup(perm, geo)
+        d = self.stage_dir(ctx)
+        return geo, [(s, d), *([(s2, d / FORCHHEIMER_DIR)] if s2 is not None else [])]
+
+    def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        perm = ctx.scene.permeability
+        assert perm is not None
+        geo, cases = self.cases(ctx)
+        if len(cases) == 1:  # a stale second case
+            shutil.rmtree(self.stage_dir(ctx) / FORCHHEIMER_DIR, ignore_errors=True)
+        for s, work in cases:
+            prepare_or_resume(s, solid_fraction(geo, perm), work, inputs=hashes, resume=resumes(ctx),
+                              record_flow_rate=True, preserve_volume=True, resistance=fiber_resistance(geo, perm),
+                              oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress)
+
+    def programs(self, ctx: StageContext) -> list[Program]:
+        perm = ctx.scene.permeability
+        assert perm is not None
+        d = self.stage_dir(ctx)
+        works = [d, *([d / FORCHHEIMER_DIR] if perm.forchheimer_pressure_drop_Pa is not None else [])]
+        return [solver_program(w, perm.ranks, perm.max_iterations) for w in works]
+
+    def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
+                wall_times: Mapping[str, float]) -> None:
+        perm = ctx.scene.permeability
+        assert perm is not None
+        geo, cases = self.cases(ctx)
+        results = []
+        for s_, work in cases:
+            prep = load_prepared(work, s_)
+            key = self.log_key(ctx, work / "log.simpleFoam")
+            solve = wall_times[key] if key in wall_times else solver_wall_time(work)
+            results.append(collect_case(s_, prep, {**prep.wall_times_s, "simpleFoam": solve}, record_flow_rate=True,
+                                        oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress))
+        wall = sum(sum(r.wall_times_s.values()) for r in results)
+        (s, _), res = cases[0], results[0]
         conv = flow_rate_convergence(res.history_q_bottom_m3_s, perm.convergence_window,
                                      perm.convergence_tolerance)  # fmt: skip
         fh: Forchheimer | None = None
-        s2 = forchheimer_setup(perm, geo)
-        shutil.rmtree(self.stage_dir(ctx) / FORCHHEIMER_DIR, ignore_errors=True)  # a stale one
-        if s2 is not None:  # the second point of the fit: its own case folder, the first kept
-            res2 = run_case(
-                s2, solid_fraction(geo, perm), self.stage_dir(ctx) / FORCHHEIMER_DIR,
-                record_flow_rate=True, preserve_volume=True, resistance=fiber_resistance(geo, perm),
-                oversubscribe=ctx.oversubscribe, show_progress=ctx.show_progress,
-            )  # fmt: skip
+        if len(cases) > 1:  # the second point of the fit
+            s2, res2 = cases[1][0], results[1]
             conv2 = flow_rate_convergence(res2.history_q_bottom_m3_s, perm.convergence_window,
                                           perm.convergence_tolerance)  # fmt: skip
             fh = fit_forchheimer(s, conv, s2, conv2, res2, geo.upper_z_m - geo.lower_z_m)
-        wall = time.monotonic() - start
         summary = write_permeability_h5(h5, perm, geo, s, res, conv, wall)
         if fh is not None:
             write_forchheimer_h5(h5, fh)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import shutil
-import time
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -43,15 +42,15 @@ from ..fiber_sheet import (
     write_yarns,
 )
 from ..inputs import LiggghtsInput, dump_format, file_token, fix_ref, ident_list, jump_if_at_least
-from ..liggghts_log import read_dump, thermo_rows
+from ..liggghts_log import read_dump, thermo_rows, total_wall_time
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
     read_sheet, read_yarns,
 )
 from ..provenance import file_hash, write_dataset
-from ..runner import liggghts_progress, run
+from ..runner import liggghts_progress
 from ..scene import FluidSection, PressSection, Scene
-from ._stage import Stage, StageContext
+from ._stage import Program, Stage, StageContext
 
 __all__ = ["Press", "PressPlan", "build_input", "plan"]
 
@@ -263,6 +262,7 @@ class Press(Stage):
     products = (H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME, REPORT_NAME, RESTART_NAME)
     binaries = ("fiberdem",)
     code_version = 1
+    splits = True
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
@@ -312,11 +312,10 @@ class Press(Stage):
             raise StageError(f"{ctx.build_dir / 'bin' / 'fiberdem'} not found: build first")
         plan(ctx.scene, ctx.scene.output_path)  # a target thickness above the sheet: exit 2 now
 
-    def produce(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path],
-                hashes: Mapping[str, str]) -> None:
+    def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        """The working folder: the lay-down's final restart file, the nodes of the fibers left on
+        the sheet, yarns.txt and the input script."""
         scene = ctx.scene
-        pr, dom = scene.press, scene.domain
-        assert pr is not None and dom is not None
         up = self.needs(ctx)
         p = plan(scene, scene.output_path)
         work = self.stage_dir(ctx) / "work"
@@ -327,14 +326,27 @@ class Press(Stage):
         # the fibers left on the sheet (the lay-down may have removed some)
         write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
                            read_sheet(up["laydown_h5"]).fiber_id.tolist())
-        yarns = write_yarns(work / YARNS_NAME, up["fabric_h5"])
+        write_yarns(work / YARNS_NAME, up["fabric_h5"])
         (work / INPUT_NAME).write_text(build_input(scene, p))
-        t0 = time.monotonic()
-        run([str((ctx.build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log", "none"],
-            Path(LOG_NAME), cwd=work, ranks=pr.ranks, progress=liggghts_progress(p.total_steps),
-            oversubscribe=ctx.oversubscribe, description="fiberdem press",
-            show_progress=ctx.show_progress)
-        wall = time.monotonic() - t0
+
+    def programs(self, ctx: StageContext) -> list[Program]:
+        pr = ctx.scene.press
+        assert pr is not None
+        work = (self.stage_dir(ctx) / "work").resolve()
+        p = plan(ctx.scene, ctx.scene.output_path) if self.needs(ctx)["laydown_h5"].is_file() else None
+        return [Program((str((ctx.build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log", "none"),
+                        pr.ranks, work, work / LOG_NAME, liggghts_progress(p.total_steps) if p else None)]
+
+    def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
+                wall_times: Mapping[str, float]) -> None:
+        scene = ctx.scene
+        pr = scene.press
+        assert pr is not None
+        p = plan(scene, scene.output_path)
+        work = self.stage_dir(ctx) / "work"
+        yarns = read_yarns(self.needs(ctx)["fabric_h5"])
+        key = self.log_key(ctx, work / LOG_NAME)
+        wall = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
         log = (work / LOG_NAME).read_text(errors="replace")
         if any(line.strip() == GUARD_MARKER for line in log.splitlines()):
             rows = thermo_rows(log)
