@@ -189,10 +189,18 @@ def test_every_press_field_has_an_alternative() -> None:
 @pytest.mark.parametrize("field", sorted(PRESS_ALTERNATIVES))
 def test_press_field_changes_the_input(field: str) -> None:
     base = PRESS_ALTERNATIVES[field][0]
-    if field == "ranks":
+    if field == "ranks":  # configures the launch: the stage's program line runs on press.ranks
         from fiberform.stages import press
+        from fiberform.stages._stage import StageContext
 
-        src = Path(press.__file__).read_text()
-        assert "ranks=pr.ranks" in src  # the stage launches fiberdem on press.ranks
+        def ranks(alt: bool) -> int:
+            data = yaml.safe_load(yaml.safe_dump(BASE))
+            data["laydown"].update({"yarn_contact": "newton", "fiber_contact": "newton"})
+            data["press"] = {**PRESS_BASES[base], **({"ranks": PRESS_ALTERNATIVES["ranks"][1]} if alt else {})}
+            ctx = StageContext(parse_scene(data, "press.yaml"), Path("press.yaml"), Path("build"))
+            (program,) = press.Press().programs(ctx)
+            return program.ranks
+
+        assert ranks(False) != ranks(True) == PRESS_ALTERNATIVES["ranks"][1]
         return
     assert _press_input(base) != _press_input(base, field), f"press.{field} does not reach the input"
