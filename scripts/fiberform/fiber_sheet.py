@@ -200,14 +200,19 @@ def frame_fibers(columns: Mapping[str, Any]) -> tuple[Array, Array, Array]:
     return x, present, np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
-def max_fiber_speed(columns: Mapping[str, Any]) -> float:
-    """Largest centre-of-mass speed of the fibers of a dump frame, m/s."""
+def fiber_com_speeds(columns: Mapping[str, Any]) -> tuple[Array, Array]:
+    """(mass kg, centre-of-mass speed m/s) of each fiber of a dump frame (ascending fiber ID)."""
     fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64)
     m = np.asarray(columns["mass"], dtype=float)
     _, inv = np.unique(fid, return_inverse=True)
     msum = np.bincount(inv, weights=m)
     v = np.stack([np.bincount(inv, weights=m * np.asarray(columns[c])) for c in ("vx", "vy", "vz")], 1)
-    return float(np.max(np.linalg.norm(v / msum[:, None], axis=1)))
+    return msum, np.linalg.norm(v / msum[:, None], axis=1)
+
+
+def max_fiber_speed(columns: Mapping[str, Any]) -> float:
+    """Largest centre-of-mass speed of the fibers of a dump frame, m/s."""
+    return float(np.max(fiber_com_speeds(columns)[1]))
 
 
 def solid_fraction_profile(x: Array, offsets: Array, radius: Array, edges: Array,

@@ -42,6 +42,9 @@ from .runner import openfoam_progress, run
 
 __all__ = [
     "CASE_DIR",
+    "DRAINAGE_FO",
+    "prepare_coupled_case",
+    "read_patch_history",
     "BoxSetup",
     "CaseResult",
     "Lattice",
@@ -234,6 +237,22 @@ def _reset_fields(case: Path, s: BoxSetup) -> None:
         p.boundary_field["top"]["value"] = s.delta_p_Pa / s.density_kg_m3
 
 
+def patch_flux_sum(patch: str) -> dict[str, Any]:
+    """A function object writing sum(phi) over ``patch`` after every iteration or time step."""
+    return {
+        "type": "surfaceFieldValue",
+        "libs": ['"libfieldFunctionObjects.so"'],
+        "regionType": "patch",
+        "name": patch,
+        "operation": "sum",
+        "fields": ["phi"],
+        "writeFields": False,
+        "log": False,
+        "writeControl": "timeStep",
+        "writeInterval": 1,
+    }
+
+
 def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool) -> None:
     from foamlib import FoamFile
 
@@ -243,20 +262,7 @@ def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool)
         c["writeFormat"] = "ascii"
         if record_flow_rate:
             # sum(phi) over the outlet after every SIMPLE iteration (the flow-rate history)
-            c["functions"] = {
-                FLOW_RATE_FO: {
-                    "type": "surfaceFieldValue",
-                    "libs": ['"libfieldFunctionObjects.so"'],
-                    "regionType": "patch",
-                    "name": "bottom",
-                    "operation": "sum",
-                    "fields": ["phi"],
-                    "writeFields": False,
-                    "log": False,
-                    "writeControl": "timeStep",
-                    "writeInterval": 1,
-                }
-            }
+            c["functions"] = {FLOW_RATE_FO: patch_flux_sum("bottom")}
     with FoamFile(case / "system" / "fvSolution") as f:
         f["SIMPLE"]["residualControl"]["p"] = float(s.residual_tolerance)
         f["SIMPLE"]["residualControl"]["U"] = float(s.residual_tolerance)
@@ -289,20 +295,8 @@ def _patch_sum(path: Path, patch: str) -> float:
 
 def _read_flow_rate_history(case: Path) -> tuple[npt.NDArray[np.int64], FloatArray]:
     """(iterations, sum(phi) over ``bottom``) written by the function object, m^3/s."""
-    files = sorted((case / "postProcessing" / FLOW_RATE_FO).glob("*/surfaceFieldValue*.dat"))
-    its: list[int] = []
-    qs: list[float] = []
-    for f in files:
-        for line in f.read_text(errors="replace").splitlines():
-            parts = line.split()
-            if not parts or line.lstrip().startswith("#"):
-                continue
-            try:
-                its.append(round(float(parts[0])))
-                qs.append(float(parts[1]))
-            except (ValueError, IndexError):
-                continue
-    return np.array(its, dtype=np.int64), np.array(qs, dtype=np.float64)
+    its, qs = read_patch_history(case, FLOW_RATE_FO)
+    return np.rint(its).astype(np.int64), qs
 
 
 #: Resistances within this factor of each other share one cellZone (one porosity source).
@@ -577,3 +571,87 @@ def plot_section(ax: Any, s: BoxSetup, res: CaseResult, values: FloatArray, titl
     ax.set_ylabel("z [mm]")
     ax.set_title(f"{title} at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: solid)")
     return pc
+
+
+# --------------------------------------------------------------------------------------------
+# The transient fluid of a two-way coupled lay-down (fiberPimpleFoam -coupled, issue 13)
+
+#: Function objects of the coupled fluid: sum(phi) over ``bottom`` and ``top`` after every step.
+DRAINAGE_FO = {"bottom": "drainageBottom", "top": "drainageTop"}
+
+
+def prepare_coupled_case(flow_case: Path, dest: Path, fluid_step_s: float, write_every: int = 0) -> Path:
+    """Copy the flow stage's case ``flow_case`` (mesh, boundary conditions) to ``dest`` with its
+    steady solution (latest time: U, p, phi) as time 0, and turn it into a transient
+    fiberPimpleFoam case (Euler, PIMPLE with 1 outer and 2 pressure correctors, no relaxation, the
+    fluid step ``fluid_step_s``, the drainage function objects). ``write_every`` > 0: the state is
+    written every that many fluid steps, in binary (exact: the restart points of a coupled
+    lay-down); else only at the end. Returns ``dest``."""
+    from foamlib import FoamFile
+
+    times = sorted((d for d in flow_case.iterdir()
+                    if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
+                   key=lambda d: float(d.name))  # fmt: skip
+    if not times:
+        raise StageError(f"{flow_case}: no steady solution (run the flow stage first)")
+    shutil.rmtree(dest, ignore_errors=True)
+    dest.mkdir(parents=True)
+    for part in ("constant", "system"):
+        shutil.copytree(flow_case / part, dest / part)
+    (dest / "0").mkdir()
+    for name in ("U", "p", "phi"):
+        if (times[-1] / name).is_file():
+            shutil.copy(times[-1] / name, dest / "0" / name)
+    with FoamFile(dest / "system" / "controlDict") as c:
+        c["application"] = "fiberPimpleFoam"
+        c["startFrom"] = "startTime"
+        c["startTime"] = 0
+        c["endTime"] = 1e9  # ignored in a coupled run: the fibers end it
+        c["deltaT"] = float(fluid_step_s)
+        c["writeControl"] = "timeStep"
+        c["writeInterval"] = int(write_every) if write_every > 0 else 10**9  # and at the end
+        c["writeFormat"] = "binary"  # exact restart states
+        c["timePrecision"] = 12
+        c["functions"] = {name: patch_flux_sum(patch) for patch, name in DRAINAGE_FO.items()}
+    with FoamFile(dest / "system" / "fvSchemes") as f:
+        f["ddtSchemes"] = {"default": "Euler"}
+        f["divSchemes"]["div(phi,U)"] = ("Gauss", "linearUpwind", "grad(U)")
+    with FoamFile(dest / "system" / "fvSolution") as f:
+        solvers = f["solvers"]
+        f["solvers"] = {
+            "p": solvers["p"],
+            "pFinal": {**dict(solvers["p"]), "relTol": 0},
+            "U": {**dict(solvers["U"]), "relTol": 0},
+            "UFinal": {**dict(solvers["U"]), "relTol": 0},
+        }
+        f["PIMPLE"] = {"momentumPredictor": True, "nOuterCorrectors": 1, "nCorrectors": 2,
+                       "nNonOrthogonalCorrectors": 0}  # fmt: skip
+        for stale in ("SIMPLE", "relaxationFactors"):
+            if stale in f:
+                del f[stale]
+    return dest
+
+
+def read_patch_history(case: Path, name: str) -> tuple[FloatArray, FloatArray]:
+    """(times, value) of a surfaceFieldValue function object ``name`` (one value per line). A run
+    restarted at time t writes a new folder ``t``: each folder's values count up to the next
+    folder's start time (a restarted run replaces what the killed run wrote after t)."""
+    dirs = sorted((d for d in (case / "postProcessing" / name).glob("*")
+                   if d.is_dir() and _is_number(d.name)), key=lambda d: float(d.name))  # fmt: skip
+    ts: list[float] = []
+    vs: list[float] = []
+    for k, d in enumerate(dirs):
+        end = float(dirs[k + 1].name) if k + 1 < len(dirs) else math.inf
+        for line in "".join(f.read_text(errors="replace") + "\n"
+                            for f in sorted(d.glob("surfaceFieldValue*.dat"))).splitlines():
+            parts = line.split()
+            if not parts or line.lstrip().startswith("#"):
+                continue
+            try:
+                t, v = float(parts[0]), float(parts[1])
+            except (ValueError, IndexError):
+                continue
+            if t <= end * (1 + 1e-9):
+                ts.append(t)
+                vs.append(v)
+    return np.array(ts, dtype=np.float64), np.array(vs, dtype=np.float64)
