@@ -87,7 +87,10 @@ class Result:
 
 
 def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
-             pre_fix: Sequence[str] = ()) -> Result:
+             pre_fix: Sequence[str] = (), partner: Sequence[str] = (),
+             timeout_s: float = 900) -> Result:
+    """Write and run the case; ``partner``: a second program started under the same mpirun (MPMD,
+    one rank), e.g. ``[fiberPimpleFoam, "-coupled", "-case", dir]`` for a coupled run."""
     if case.integrator not in ("explicit", "implicit"):
         raise ValueError(f"Case.integrator must be 'explicit' or 'implicit', not {case.integrator!r}")
     work.mkdir(parents=True, exist_ok=True)
@@ -118,9 +121,11 @@ def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
     (work / "in.case").write_text("\n".join(lines) + "\n")
     exe = str(build_dir / "bin" / "fiberdem")
     cmd = [exe, "-in", "in.case", "-log", "log.case", "-screen", "none"]
-    if ranks > 1:
+    if ranks > 1 or partner:
         cmd = ["mpirun", "-np", str(ranks), *cmd]
-    proc = subprocess.run(cmd, cwd=work, env=ENV, capture_output=True, text=True, timeout=900,
+    if partner:
+        cmd += [":", "-np", "1", *map(str, partner)]
+    proc = subprocess.run(cmd, cwd=work, env=ENV, capture_output=True, text=True, timeout=timeout_s,
                           errors="replace")
     log = ((work / "log.case").read_text(errors="replace") if (work / "log.case").exists()
            else "")

@@ -131,3 +131,33 @@ def test_uniform_source_gives_poiseuille(solver: Path, tmp_path: Path) -> None:
     assert error < 0.01, f"profile deviates from Poiseuille by {error:.2%} of u_max"
     # the flow rate (mean velocity g H^2 / (12 nu)) within 1 % as well
     assert u[:, 0].mean() == pytest.approx(g * height**2 / (12 * nu), rel=0.01)
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs 2 cores for 2 MPI ranks")
+def test_rebuilt_pstream_is_a_drop_in(tmp_path: Path) -> None:
+    """scripts/setup/openfoam-pstream.sh rebuilds libPstream with a split of MPI_COMM_WORLD by
+    MPI_APPNUM (for parallel OpenFOAM next to fiberdem under one mpirun). Alone, the split holds every
+    rank: stock pimpleFoam on 2 ranks must give identical fields with the rebuilt library."""
+    if not (ROOT / ".deps" / "openfoam" / "src" / "Pstream" / "mpi" / "UPstream.C").is_file():
+        pytest.fail("OpenFOAM sources missing: run scripts/setup/openfoam-headers.sh")
+    lib = tmp_path / "pstream"
+    proc = subprocess.run(["bash", str(ROOT / "scripts" / "setup" / "openfoam-pstream.sh")],
+                          env={**ENV, "FIBERFORM_PSTREAM_DIR": str(lib)}, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rebuilt_env = {**ENV, "LD_LIBRARY_PATH": str(lib)}
+    ldd = subprocess.run(["ldd", shutil.which("pimpleFoam") or "pimpleFoam"], env=rebuilt_env,
+                         capture_output=True, text=True).stdout
+    assert f"libPstream.so => {lib}/libPstream.so" in ldd, ldd
+
+    stock = meshed_case("cavity", tmp_path / "stock")
+    run(stock, "decomposePar", log="decomposePar")
+    rebuilt = tmp_path / "rebuilt"
+    shutil.copytree(stock, rebuilt)
+    run(stock, "mpirun", "-np", "2", "pimpleFoam", "-parallel", log="pimpleFoam")
+    with (rebuilt / "log.pimpleFoam").open("w") as out:
+        proc = subprocess.run(["mpirun", "-np", "2", "pimpleFoam", "-parallel"], cwd=rebuilt,
+                              env=rebuilt_env, stdout=out, stderr=subprocess.STDOUT, timeout=120)
+    assert proc.returncode == 0, (rebuilt / "log.pimpleFoam").read_text()[-3000:]
+    for rank in (0, 1):
+        assert_same_fields(stock / f"processor{rank}", rebuilt / f"processor{rank}")

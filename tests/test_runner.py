@@ -16,6 +16,7 @@ from fiberform.runner import (
     build_env,
     capture,
     liggghts_progress,
+    mpmd_command,
     openfoam_progress,
     run,
 )
@@ -116,6 +117,22 @@ def test_ranks_and_oversubscription(monkeypatch: pytest.MonkeyPatch) -> None:
     assert "--allow-run-as-root" not in cmd
     if cores >= 2:
         assert build_command(["a"], 2)[1:] == ["-np", "2", "a"]
+
+
+def test_mpmd_command_counts_all_ranks() -> None:
+    """One mpirun for two programs (the two-way lay-down): the ranks of both count against the
+    cores; the programs are separated by ':'."""
+    cores = os.cpu_count() or 1
+    with pytest.raises(ConfigError, match="in total"):
+        mpmd_command([(["a"], cores), (["b"], 1)])
+    with pytest.raises(ConfigError):
+        mpmd_command([(["a"], 1), (["b"], 0)])
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    cmd = mpmd_command([(["a", "x"], cores), (["b"], 1)], oversubscribe=True)
+    assert cmd[1:] == ["--oversubscribe", "-np", str(cores), "a", "x", ":", "-np", "1", "b"]
+    if cores >= 2:
+        assert mpmd_command([(["a"], 1), (["b"], 1)])[1:] == ["-np", "1", "a", ":", "-np", "1", "b"]
 
 
 @pytest.mark.skipif(

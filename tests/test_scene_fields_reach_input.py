@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Every field of the laydown and contact sections reaches the generated LIGGGHTS input of the
+"""Every field of the laydown, contact and coupling sections reaches the generated LIGGGHTS input of the
 lay-down (issue 10: a field that configures nothing must not exist). The fields are enumerated from
 the pydantic models, so a new field without an effect (or without an entry in ALTERNATIVES) fails
 this test. No binaries needed: the input is rendered by the stage's own function."""
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from fiberform.scene import ContactSection, LaydownSection, parse_scene
+from fiberform.scene import ContactSection, CouplingSection, LaydownSection, parse_scene
 from fiberform.stages import laydown
 
 BASE = {
@@ -42,6 +42,7 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "restart_interval_s": 1.0e-3, "ranks": 2, "fiber_contact": "newton",
         "settle_mass_fraction": 0.99,
     },
+    "coupling": {"mode": "two_way", "interval": 250, "timeout_s": 60.0, "reaction": "off"},
     "contact": {
         "integrator": "cvode", "terms": ["vdw", "steric"], "hamaker_J": 1.0e-20,
         "ionic_strength_mol_m3": 2.0, "surface_potential_V": -0.03, "cutoff_m": 3.0e-8,
@@ -54,25 +55,34 @@ SINGLE_CHOICE = {("contact", "model")}
 LAUNCH = {("laydown", "ranks")}
 # laydown fields that act only together with other laydown values (set in both renderings)
 NEEDS: dict[tuple[str, str], dict[str, object]] = {("laydown", "settle_mass_fraction"): {"settle_measure": "fiber"}}
+# coupling fields other than mode only act with mode two_way: their base scene is two-way
+TWO_WAY_BASE = {"mode": "two_way"}
 
 
 def scene_with(section: str | None = None, field: str | None = None,
                base: dict[str, object] | None = None):  # type: ignore[no-untyped-def]
     data = yaml.safe_load(yaml.safe_dump(BASE))
     data["laydown"].update(base or {})
+    if section == "coupling" and field != "mode":
+        data["coupling"] = dict(TWO_WAY_BASE)
     if section is not None and field is not None:
-        data[section][field] = ALTERNATIVES[section][field]
+        data.setdefault(section, {})[field] = ALTERNATIVES[section][field]
     return parse_scene(data, "fields.yaml")
 
 
 def render(section: str | None = None, field: str | None = None,
-           base: dict[str, object] | None = None) -> str:
+           base: dict[str, object] | None = None, base_section: str | None = None) -> str:
+    if base_section == "coupling":  # the two-way base scene without the changed field
+        data = yaml.safe_load(yaml.safe_dump(BASE))
+        data["coupling"] = dict(TWO_WAY_BASE)
+        return laydown.render_input(parse_scene(data, "fields.yaml"), U_S)
     return laydown.render_input(scene_with(section, field, base), U_S)
 
 
 def cases() -> list[tuple[str, str]]:
     out = []
-    for section, model in (("laydown", LaydownSection), ("contact", ContactSection)):
+    for section, model in (("laydown", LaydownSection), ("contact", ContactSection),
+                           ("coupling", CouplingSection)):
         out += [(section, f) for f in model.model_fields if (section, f) not in SINGLE_CHOICE]
     return out
 
@@ -90,8 +100,9 @@ def test_field_changes_the_generated_input(section: str, field: str) -> None:
                 != laydown.launch(scene_with(section, field, newton), build)), \
             f"{section}.{field} does not reach the fiberdem launch"
         return
-    base = NEEDS.get((section, field))
-    assert render(base=base) != render(section, field, base), f"{section}.{field} does not reach the input"
+    needs = NEEDS.get((section, field))
+    base = render(base=needs, base_section=section if section == "coupling" and field != "mode" else None)
+    assert base != render(section, field, needs), f"{section}.{field} does not reach the input"
 
 
 # ---- permeability (issue 12): every field reaches the box case, the run options or the output --

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "abi_guard.h"
+#include "coupling_layer.h"
 #include "input.h"
 #include "lammps.h"
 #include "style_registry.h"
@@ -43,8 +44,11 @@ bool has_flag(int argc, char **argv, const char *a, const char *b = nullptr) {
 
 int main(int argc, char **argv) {
   MPI_Init(&argc, &argv);
+  // First collective on MPI_COMM_WORLD: split by MPI_APPNUM (a coupled MPMD run with
+  // fiberPimpleFoam -coupled, docs/coupling/launch.md); alone, `local` holds every rank of the world.
+  const MPI_Comm local = fiberform::coupling::start_world().local;
   int rank = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_rank(local, &rank);
 
   if (has_flag(argc, argv, "-h", "--help") || has_flag(argc, argv, "-help")) {
     if (rank == 0) print_help();
@@ -57,8 +61,8 @@ int main(int argc, char **argv) {
   char *quiet_argv[5];
   for (int i = 0; i < 5; ++i) quiet_argv[i] = quiet[i].data();
 
-  auto *lmp = version_only ? new LAMMPS_NS::LAMMPS(5, quiet_argv, MPI_COMM_WORLD)
-                           : new LAMMPS_NS::LAMMPS(argc, argv, MPI_COMM_WORLD);
+  auto *lmp = version_only ? new LAMMPS_NS::LAMMPS(5, quiet_argv, local)
+                           : new LAMMPS_NS::LAMMPS(argc, argv, local);
 
   const std::string abi = fiberform::check_library_layout(lmp);
   if (!abi.empty()) {

@@ -150,6 +150,7 @@ void FixFiberDrag::post_force(int) {
   double **f = atom->f;
   double *rmass = atom->rmass;
   for (double &s : local_) s = 0.0;
+  node_drag_.assign(3 * static_cast<std::size_t>(nlocal), 0.0);
   // implicit fibers: each node also gets the row-sum-lumped velocity Jacobian of its drag,
   // D_i = sum over its elements of (len/2) df/du (the node's half of the element force changes by
   // -(len/2) df/du dv when both nodes move together), so fix fiber/beam treats drag linearly
@@ -180,6 +181,7 @@ void FixFiberDrag::post_force(int) {
     }
     for (int k = 0; k < 3; ++k) {
       const double body = (rmass[i] - rho_f_ * volume) * g_[k];
+      node_drag_[3 * static_cast<std::size_t>(i) + k] = fi[k];
       f[i][k] += fi[k] + body;
       local_[3 + k] += body;
     }

@@ -18,6 +18,7 @@
 #define LMP_FIX_FIBER_DRAG_H
 
 #include <memory>
+#include <vector>
 
 #include "fix.h"
 
@@ -40,6 +41,16 @@ class FixFiberDrag : public Fix {
   /// Replace the velocity field (e.g. by a coupled, time-varying one). Takes ownership.
   void set_flow(std::unique_ptr<fiberform::physics::flow::FlowField> flow);
 
+  /// Drag force (N, xyz) this fix applied to local atom i in its last post_force (the node's halves
+  /// of its elements' eq. 2.14 forces; zero for atoms that are not fiber nodes of the group, and zero
+  /// with `drag no`). Valid until the atoms are next re-sorted or exchanged (the next step's
+  /// neighbouring), i.e. for fixes at end_of_step of the same step. Gravity and buoyancy excluded.
+  const double *node_drag(int i) const { return &node_drag_[3 * static_cast<std::size_t>(i)]; }
+  /// Number of local atoms node_drag() covers (atom->nlocal at the last post_force).
+  int node_drag_count() const { return static_cast<int>(node_drag_.size() / 3); }
+  double fluid_density() const { return rho_f_; }  ///< kg/m3
+  double viscosity() const { return mu_; }         ///< Pa s
+
  private:
   // drag on element i -> j into fe (N); jac (optional): its Jacobian df/du times the length (N s/m)
   double element_force(int i, int j, double fe[3], double *jac = nullptr) const;
@@ -53,6 +64,7 @@ class FixFiberDrag : public Fix {
   double sums_[7] = {0, 0, 0, 0, 0, 0, 0};  // drag xyz (N), gravity+buoyancy xyz (N), elements
   bool sums_valid_ = false;
   double local_[7] = {0, 0, 0, 0, 0, 0, 0};
+  std::vector<double> node_drag_;  // 3 per local atom, see node_drag()
 };
 
 }  // namespace LAMMPS_NS

@@ -17,6 +17,7 @@
 #include "fix_wall_fiber_dlvo.h"
 #include "fix_fiber_beam.h"
 #include "fix_fiber_drag.h"
+#include "fix_fiber_coupling.h"
 #include "fix_fiber_yarns.h"
 
 namespace fiberform {
@@ -51,6 +52,10 @@ const StyleEntry kStyles[] = {
     {StyleKind::Fix, "fiber/drag",
      "fluid drag (thesis eq. 2.14-2.16), gravity and buoyancy on fiber/beam elements; uniform or grid flow",
      nullptr, &make_fix<LAMMPS_NS::FixFiberDrag>, nullptr},
+    {StyleKind::Fix, "fiber/coupling",
+     "two-way coupling with fiberPimpleFoam -coupled (MPMD): coupled flow for fiber/drag, drag reaction "
+     "sent to the fluid cells every N steps",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberCoupling>, nullptr},
     {StyleKind::Fix, "fiber/yarns",
      "static yarn chains and planes (fiber/dlvo law inside each implicit fiber solve, or sub-integrated: "
      "CVODE or sub-steps) for fiber/beam elements; removes fibers; settle check",

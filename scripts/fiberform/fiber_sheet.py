@@ -200,16 +200,21 @@ def frame_fibers(columns: Mapping[str, Any]) -> tuple[Array, Array, Array]:
     return x, present, np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
-def max_fiber_speed(columns: Mapping[str, Any], mass_fraction: float = 1.0) -> float:
-    """Centre-of-mass speeds of the fibers of a dump frame (m/s): the largest, or with
-    ``mass_fraction`` q < 1 the speed below which the fibers carrying q of the mass move (the
-    settle measure of fix fiber/yarns ``settle_mass_fraction``, physics/settle.h)."""
+def fiber_com_speeds(columns: Mapping[str, Any]) -> tuple[Array, Array]:
+    """(mass kg, centre-of-mass speed m/s) of each fiber of a dump frame (ascending fiber ID)."""
     fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64)
     m = np.asarray(columns["mass"], dtype=float)
     _, inv = np.unique(fid, return_inverse=True)
     msum = np.bincount(inv, weights=m)
     v = np.stack([np.bincount(inv, weights=m * np.asarray(columns[c])) for c in ("vx", "vy", "vz")], 1)
-    speed = np.linalg.norm(v / msum[:, None], axis=1)
+    return msum, np.linalg.norm(v / msum[:, None], axis=1)
+
+
+def max_fiber_speed(columns: Mapping[str, Any], mass_fraction: float = 1.0) -> float:
+    """Centre-of-mass speeds of the fibers of a dump frame (m/s): the largest, or with
+    ``mass_fraction`` q < 1 the speed below which the fibers carrying q of the mass move (the
+    settle measure of fix fiber/yarns ``settle_mass_fraction``, physics/settle.h)."""
+    msum, speed = fiber_com_speeds(columns)
     if mass_fraction >= 1.0:
         return float(np.max(speed))
     order = np.argsort(speed, kind="stable")

@@ -44,6 +44,9 @@ from .runner import Program, openfoam_progress, run
 
 __all__ = [
     "CASE_DIR",
+    "DRAINAGE_FO",
+    "prepare_coupled_case",
+    "read_patch_history",
     "BoxSetup",
     "CaseResult",
     "Lattice",
@@ -250,6 +253,22 @@ def _reset_fields(case: Path, s: BoxSetup) -> None:
         p.boundary_field["top"]["value"] = s.delta_p_Pa / s.density_kg_m3
 
 
+def patch_flux_sum(patch: str) -> dict[str, Any]:
+    """A function object writing sum(phi) over ``patch`` after every iteration or time step."""
+    return {
+        "type": "surfaceFieldValue",
+        "libs": ['"libfieldFunctionObjects.so"'],
+        "regionType": "patch",
+        "name": patch,
+        "operation": "sum",
+        "fields": ["phi"],
+        "writeFields": False,
+        "log": False,
+        "writeControl": "timeStep",
+        "writeInterval": 1,
+    }
+
+
 def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool) -> None:
     from foamlib import FoamFile
 
@@ -260,20 +279,7 @@ def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool)
         c["writeFormat"] = "ascii"
         if record_flow_rate:
             # sum(phi) over the outlet after every SIMPLE iteration (the flow-rate history)
-            c["functions"] = {
-                FLOW_RATE_FO: {
-                    "type": "surfaceFieldValue",
-                    "libs": ['"libfieldFunctionObjects.so"'],
-                    "regionType": "patch",
-                    "name": "bottom",
-                    "operation": "sum",
-                    "fields": ["phi"],
-                    "writeFields": False,
-                    "log": False,
-                    "writeControl": "timeStep",
-                    "writeInterval": 1,
-                }
-            }
+            c["functions"] = {FLOW_RATE_FO: patch_flux_sum("bottom")}
     with FoamFile(case / "system" / "fvSolution") as f:
         f["SIMPLE"]["residualControl"]["p"] = float(s.residual_tolerance)
         f["SIMPLE"]["residualControl"]["U"] = float(s.residual_tolerance)
@@ -305,28 +311,10 @@ def _patch_sum(path: Path, patch: str) -> float:
 
 
 def _read_flow_rate_history(case: Path) -> tuple[npt.NDArray[np.int64], FloatArray]:
-    """(iterations, sum(phi) over ``bottom``) written by the function object, m^3/s. A resumed
-    run writes a new file (in a folder named by its start time, or with that time as suffix): the
-    files are read in the order of their start times, and each drops what the earlier ones hold
-    after its start (the iterations a killed run did past its last time directory)."""
-    files = []
-    for f in (case / "postProcessing" / FLOW_RATE_FO).glob("*/surfaceFieldValue*.dat"):
-        suffix = f.stem.partition("_")[2]
-        t0 = float(suffix) if _is_number(suffix) else float(f.parent.name) if _is_number(f.parent.name) else 0.0
-        files.append((t0, f.stat().st_mtime_ns, f))
-    history: dict[int, float] = {}
-    for t0, _, f in sorted(files):
-        history = {i: q for i, q in history.items() if i <= t0}
-        for line in f.read_text(errors="replace").splitlines():
-            parts = line.split()
-            if not parts or line.lstrip().startswith("#"):
-                continue
-            try:
-                history[round(float(parts[0]))] = float(parts[1])
-            except (ValueError, IndexError):
-                continue
-    its = sorted(history)
-    return np.array(its, dtype=np.int64), np.array([history[i] for i in its], dtype=np.float64)
+    """(iterations, sum(phi) over ``bottom``) written by the function object, m^3/s (a resumed
+    run's files: :func:`read_patch_history`)."""
+    its, qs = read_patch_history(case, FLOW_RATE_FO)
+    return np.rint(its).astype(np.int64), qs
 
 
 #: Resistances within this factor of each other share one cellZone (one porosity source).
@@ -792,3 +780,88 @@ def plot_section(ax: Any, s: BoxSetup, res: CaseResult, values: FloatArray, titl
     ax.set_ylabel("z [mm]")
     ax.set_title(f"{title} at y = {res.lattice_y[j] * 1e3:.3f} mm (grey: solid)")
     return pc
+
+
+# --------------------------------------------------------------------------------------------
+# The transient fluid of a two-way coupled lay-down (fiberPimpleFoam -coupled, issue 13)
+
+#: Function objects of the coupled fluid: sum(phi) over ``bottom`` and ``top`` after every step.
+DRAINAGE_FO = {"bottom": "drainageBottom", "top": "drainageTop"}
+
+
+def prepare_coupled_case(flow_case: Path, dest: Path, fluid_step_s: float, write_every: int = 0) -> Path:
+    """Copy the flow stage's case ``flow_case`` (mesh, boundary conditions) to ``dest`` with its
+    steady solution (latest time: U, p, phi) as time 0, and turn it into a transient
+    fiberPimpleFoam case (Euler, PIMPLE with 1 outer and 2 pressure correctors, no relaxation, the
+    fluid step ``fluid_step_s``, the drainage function objects). ``write_every`` > 0: the state is
+    written every that many fluid steps, in binary (exact: the restart points of a coupled
+    lay-down); else only at the end. Returns ``dest``."""
+    from foamlib import FoamFile
+
+    times = sorted((d for d in flow_case.iterdir()
+                    if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
+                   key=lambda d: float(d.name))  # fmt: skip
+    if not times:
+        raise StageError(f"{flow_case}: no steady solution (run the flow stage first)")
+    shutil.rmtree(dest, ignore_errors=True)
+    dest.mkdir(parents=True)
+    for part in ("constant", "system"):
+        shutil.copytree(flow_case / part, dest / part)
+    (dest / "0").mkdir()
+    for name in ("U", "p", "phi"):
+        if (times[-1] / name).is_file():
+            shutil.copy(times[-1] / name, dest / "0" / name)
+    with FoamFile(dest / "system" / "controlDict") as c:
+        c["application"] = "fiberPimpleFoam"
+        c["startFrom"] = "startTime"
+        c["startTime"] = 0
+        c["endTime"] = 1e9  # ignored in a coupled run: the fibers end it
+        c["deltaT"] = float(fluid_step_s)
+        c["writeControl"] = "timeStep"
+        c["writeInterval"] = int(write_every) if write_every > 0 else 10**9  # and at the end
+        c["writeFormat"] = "binary"  # exact restart states
+        c["timePrecision"] = 12
+        c["functions"] = {name: patch_flux_sum(patch) for patch, name in DRAINAGE_FO.items()}
+    with FoamFile(dest / "system" / "fvSchemes") as f:
+        f["ddtSchemes"] = {"default": "Euler"}
+        f["divSchemes"]["div(phi,U)"] = ("Gauss", "linearUpwind", "grad(U)")
+    with FoamFile(dest / "system" / "fvSolution") as f:
+        solvers = f["solvers"]
+        f["solvers"] = {
+            "p": solvers["p"],
+            "pFinal": {**dict(solvers["p"]), "relTol": 0},
+            "U": {**dict(solvers["U"]), "relTol": 0},
+            "UFinal": {**dict(solvers["U"]), "relTol": 0},
+        }
+        f["PIMPLE"] = {"momentumPredictor": True, "nOuterCorrectors": 1, "nCorrectors": 2,
+                       "nNonOrthogonalCorrectors": 0}  # fmt: skip
+        for stale in ("SIMPLE", "relaxationFactors"):
+            if stale in f:
+                del f[stale]
+    return dest
+
+
+def read_patch_history(case: Path, name: str) -> tuple[FloatArray, FloatArray]:
+    """(times or iterations, value) of a surfaceFieldValue function object ``name`` (one value per
+    line). A resumed run writes a new file, in a folder named by its start time or with that time
+    as the file name's suffix: the files are read in the order of their start times, and each
+    drops what the earlier ones hold after its start (what a killed run wrote past the time it is
+    resumed from)."""
+    files = []
+    for f in (case / "postProcessing" / name).glob("*/surfaceFieldValue*.dat"):
+        suffix = f.stem.partition("_")[2]
+        t0 = float(suffix) if _is_number(suffix) else float(f.parent.name) if _is_number(f.parent.name) else 0.0
+        files.append((t0, f.stat().st_mtime_ns, str(f), f))
+    history: dict[float, float] = {}
+    for t0, _, _, f in sorted(files):
+        history = {t: v for t, v in history.items() if t <= t0 * (1 + 1e-9)}
+        for line in f.read_text(errors="replace").splitlines():
+            parts = line.split()
+            if not parts or line.lstrip().startswith("#"):
+                continue
+            try:
+                history[float(parts[0])] = float(parts[1])
+            except (ValueError, IndexError):
+                continue
+    ts = sorted(history)
+    return np.array(ts, dtype=np.float64), np.array([history[t] for t in ts], dtype=np.float64)

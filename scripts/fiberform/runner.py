@@ -49,6 +49,7 @@ __all__ = [
     "RunResult",
     "build_command",
     "build_env",
+    "mpmd_command",
     "capture",
     "liggghts_progress",
     "openfoam_progress",
@@ -112,6 +113,27 @@ def build_command(cmd: Sequence[str], ranks: int = 1, oversubscribe: bool = Fals
     if ranks > cores:
         prefix.append("--oversubscribe")
     return prefix + list(cmd)
+
+
+def mpmd_command(parts: Sequence[tuple[Sequence[str], int]], oversubscribe: bool = False) -> list[str]:
+    """One ``mpirun`` starting several programs (MPMD): ``mpirun -np A cmd1 : -np B cmd2``; the
+    total ranks are checked against the cores as in :func:`build_command`. Run the result with
+    ``ranks=1``."""
+    total = 0
+    out: list[str] = []
+    for cmd, ranks in parts:
+        build_command(cmd, 1)  # argument checks
+        if isinstance(ranks, bool) or not isinstance(ranks, int) or ranks < 1:
+            raise ConfigError(f"ranks must be an integer >= 1, got {ranks!r}")
+        total += ranks
+        out += ([":"] if out else []) + ["-np", str(ranks), *cmd]
+    if total > _cores() and not oversubscribe:
+        raise ConfigError(f"{total} MPI ranks requested in total but this machine has {_cores()} "
+                          "cores; lower the ranks or pass --oversubscribe")
+    mpirun = shutil.which("mpirun")
+    if mpirun is None:
+        raise ConfigError("mpirun not found on PATH (install openmpi-bin)")
+    return [mpirun, *(["--oversubscribe"] if total > _cores() else []), *out]
 
 
 def build_env(env_extra: Mapping[str, str] | None = None) -> dict[str, str]:

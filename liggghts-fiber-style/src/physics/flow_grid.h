@@ -73,8 +73,15 @@ struct RegularGrid {
   }
 };
 
-/// Trilinear interpolation of a RegularGrid; positions outside the box are clamped onto it.
-inline Vec3 interpolate(const RegularGrid &g, const Vec3 &x) {
+/// The trilinear stencil of a point: up to 8 grid nodes (flat node number (i * ny + j) * nz + k) with
+/// weights > 0 that sum to 1 (to round-off); positions outside the box are clamped onto it.
+struct Stencil {
+  std::array<std::size_t, 8> node{};
+  std::array<double, 8> weight{};
+  int size = 0;
+};
+
+inline Stencil trilinear_stencil(const RegularGrid &g, const Vec3 &x) {
   std::int64_t i0[3];
   double w[3];
   for (int a = 0; a < 3; ++a) {
@@ -92,7 +99,7 @@ inline Vec3 interpolate(const RegularGrid &g, const Vec3 &x) {
       w[a] = s - static_cast<double>(i0[a]);
     }
   }
-  Vec3 out{0.0, 0.0, 0.0};
+  Stencil st;
   for (int di = 0; di < 2; ++di) {
     const double wi = di ? w[0] : 1.0 - w[0];
     if (wi == 0.0) continue;
@@ -102,13 +109,25 @@ inline Vec3 interpolate(const RegularGrid &g, const Vec3 &x) {
       for (int dk = 0; dk < 2; ++dk) {
         const double wk = dk ? w[2] : 1.0 - w[2];
         if (wk == 0.0) continue;
-        const std::size_t idx = g.index(i0[0] + di, i0[1] + dj, i0[2] + dk);
-        const double wt = wi * wj * wk;
-        out[0] += wt * g.data[idx];
-        out[1] += wt * g.data[idx + 1];
-        out[2] += wt * g.data[idx + 2];
+        st.node[static_cast<std::size_t>(st.size)] = g.index(i0[0] + di, i0[1] + dj, i0[2] + dk) / 3;
+        st.weight[static_cast<std::size_t>(st.size)] = wi * wj * wk;
+        ++st.size;
       }
     }
+  }
+  return st;
+}
+
+/// Trilinear interpolation of a RegularGrid; positions outside the box are clamped onto it.
+inline Vec3 interpolate(const RegularGrid &g, const Vec3 &x) {
+  const Stencil st = trilinear_stencil(g, x);
+  Vec3 out{0.0, 0.0, 0.0};
+  for (int s = 0; s < st.size; ++s) {
+    const std::size_t idx = 3 * st.node[static_cast<std::size_t>(s)];
+    const double wt = st.weight[static_cast<std::size_t>(s)];
+    out[0] += wt * g.data[idx];
+    out[1] += wt * g.data[idx + 1];
+    out[2] += wt * g.data[idx + 2];
   }
   return out;
 }

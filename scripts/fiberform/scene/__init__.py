@@ -28,6 +28,7 @@ from .fabric import FabricSection
 from .flow import FlowSection
 from .permeability import PermeabilitySection
 from .laydown import LaydownSection
+from .coupling import CouplingSection
 from .press import PressSection
 from .model import SECTIONS, Scene, section_hash
 from .loader import load_scene, parse_scene, read_scene_yaml
@@ -35,6 +36,7 @@ from .docs import field_table
 
 __all__ = [
     "ContactSection",
+    "CouplingSection",
     "DemoParticlesSection",
     "DomainSection",
     "FabricSection",

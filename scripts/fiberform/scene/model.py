@@ -20,6 +20,7 @@ from .fabric import FabricSection
 from .flow import FlowSection
 from .permeability import PermeabilitySection
 from .laydown import LaydownSection
+from .coupling import CouplingSection
 from .press import PressSection
 
 
@@ -65,6 +66,10 @@ class Scene(_Section):
     laydown: LaydownSection | None = Field(
         default=None, description="Lay-down of the fibers on the fabric (stage laydown)"
     )
+    coupling: CouplingSection | None = Field(
+        default=None,
+        description="Fiber-fluid coupling of the lay-down (absent: one_way, the frozen flow)",
+    )
     permeability: PermeabilitySection | None = Field(
         default=None, description="Air permeability of the fabric and sheet (stage permeability)"
     )
@@ -109,7 +114,7 @@ class Scene(_Section):
 
 SECTIONS: tuple[str, ...] = (
     "domain", "fluid", "fibers", "contact", "run", "demo_particles", "fabric", "flow",
-    "fiber_generation", "laydown", "permeability", "press",
+    "fiber_generation", "laydown", "coupling", "permeability", "press",
 )
 
 

@@ -15,6 +15,12 @@ once fix fiber/yarns has counted ``settle_checks`` consecutive checks with every
 ``settle_speed_m_s`` (the settle criterion), else it ends at ``max_time_s``. A snapshot of every
 node is dumped at each check (``traj.dump``); the last snapshot is the sheet.
 
+With ``coupling: {mode: two_way}`` fiberdem runs under one mpirun with ``fiberPimpleFoam -coupled``
+(issue 13): the fluid case ``work/fluid`` is the flow stage's case with its steady solution as the
+initial state, exchanging with the fibers on flow.grid's grid through the exchange map
+(fiberform.coupling_map); the drainage (flow rate out through the bottom) after every fluid step goes
+to laydown.h5 ``/drainage`` and the report. ``--resume`` restarts both sides.
+
 Products in ``<output_dir>/laydown/``: ``laydown.h5``, ``sheet.vtu`` (ParaView), ``laydown.png``,
 ``report.md``. Page: docs/stages/laydown.md.
 """
@@ -25,7 +31,7 @@ import json
 import math
 import re
 import shutil
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -33,19 +39,22 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
+from ..coupling_map import MAP_NAME, ExchangeGrid, exchange_map, write_exchange_map
 from ..errors import StageError
 from ..fiber_io import fiber_preamble
 from ..fiber_sheet import (
-    contact_commands, element_clearance, fiber_fiber_gap, frame_fibers, max_fiber_speed,
-    pair_options, sheet_thickness, write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
+    contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
+    max_fiber_speed, pair_options, sheet_thickness, write_sheet_png, write_sheet_vtu, write_yarns,
+    yarn_distances,
 )
 from ..inputs import (
     LiggghtsInput, dump_format, file_token, fix_ref, jump_if_at_least, step_file_token,
 )
 from ..liggghts_log import read_dump, total_wall_time
+from ..openfoam_case import CASE_DIR, DRAINAGE_FO, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
 from ..provenance import atomic_write_text, file_hash, write_dataset
-from ..runner import liggghts_progress
+from ..runner import liggghts_progress, mpmd_command, run
 from ..scene import FluidSection, Scene
 from ._stage import Outcome, Program, Stage, StageContext
 
@@ -61,6 +70,7 @@ _SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
 EARLIER_LOG, RESUME_STATE = "log.earlier", "resume.json"
 #: Written by prepare: the step the run starts from (null: a fresh run), read by collect.
 PREPARED_STEP = "prepared-step.json"
+FLUID_CASE = "fluid"  # the coupled fluid's OpenFOAM case in the working folder (two_way)
 SHEET_RESTART, SETTLED_LABEL = "sheet.restart", "laydown_end"
 
 
@@ -92,6 +102,23 @@ def launch(scene: Scene, build_dir: Path) -> tuple[list[str], int]:
     ld = scene.laydown
     assert ld is not None
     return [str((build_dir / "bin" / "fiberdem").resolve()), "-in", INPUT_NAME, "-log", "none"], ld.ranks
+
+
+def two_way(scene: Scene) -> bool:
+    return scene.coupling is not None and scene.coupling.mode == "two_way"
+
+
+def coupled_launch(scene: Scene, build_dir: Path, oversubscribe: bool = False) -> list[str]:
+    """The single mpirun (MPMD) of a two-way lay-down, run in the working folder: fiberdem on
+    laydown.ranks ranks and fiberPimpleFoam -coupled on one rank (case ``fluid``, its output in
+    ``log.fiberPimpleFoam``)."""
+    argv, ranks = launch(scene, build_dir)
+    cp = scene.coupling
+    assert cp is not None
+    fluid = [str((build_dir / "bin" / "fiberPimpleFoam").resolve()), "-coupled", "-case", FLUID_CASE,
+             "-couplingTimeout", repr(float(cp.timeout_s))]
+    redirect = ["sh", "-c", 'exec "$0" "$@" > log.fiberPimpleFoam']  # MPI environment kept by exec
+    return mpmd_command([(argv, ranks), ([*redirect, *fluid], 1)], oversubscribe)
 
 
 def restart_every(scene: Scene) -> int:
@@ -139,6 +166,11 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
         "settle", settle_speed if settle_speed is not None else ld.settle_speed_m_s,
         steps_per_check, "settle_measure", ld.settle_measure,
         *(["settle_mass_fraction", ld.settle_mass_fraction] if ld.settle_measure == "fiber" else [])])
+    cp = scene.coupling
+    if two_way(scene) and cp is not None:
+        # the fluid's cell velocities replace flow.grid at the first run (docs/coupling/launch.md)
+        s.command("fix", "couple", "all", "fiber/coupling", "drag", "drag", "interval", cp.interval,
+                  "timeout", cp.timeout_s, "reaction", "yes" if cp.reaction == "on" else "no")
     s.command("timestep", ld.timestep_s)
     s.command("variable", "settled", "equal", fix_ref("yarns", 7))
     s.command("thermo_style", "custom", "step", "atoms", fix_ref("yarns", 1), fix_ref("yarns", 2),
@@ -173,14 +205,15 @@ class Laydown(Stage):
     """Lay-down of the fibers on the fabric in the frozen flow."""
 
     name = "laydown"
-    summary = "lay the generated fibers down on the fabric in the frozen flow (one-way coupling)"
+    summary = ("lay the generated fibers down on the fabric in the frozen flow (one-way coupling) "
+               "or with the fluid (coupling two_way)")
     folder = "laydown"
     requires = ("domain", "fibers", "fabric", "flow", "laydown")
     uses = ("seed", "domain", "fibers", "fiber_generation", "fabric", "flow", "fluid", "laydown",
-            "contact")
+            "contact", "coupling")
     products = (H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME, SHEET_RESTART)
     binaries = ("fiberdem",)
-    code_version = 2
+    code_version = 3
     splits = True
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
@@ -229,6 +262,12 @@ class Laydown(Stage):
         if removal_height(scene) <= scene.domain.lo_m[2]:
             problems.append("laydown.removal_height_m: must lie above domain.lo_m[2] (fibers "
                             "leaving the box would be lost)")
+        if two_way(scene):
+            assert scene.coupling is not None
+            steps_per_check, _ = run_lengths(scene)
+            if steps_per_check % scene.coupling.interval:
+                problems.append(f"coupling.interval = {scene.coupling.interval}: must divide the "
+                                f"{steps_per_check} steps of one laydown.check_interval_s")
         if round(ld.check_interval_s / ld.timestep_s) * round(ld.max_time_s / ld.check_interval_s) > 10**8:
             problems.append("laydown.max_time_s: more than 1e8 steps")
         return problems
@@ -243,6 +282,15 @@ class Laydown(Stage):
             "flow_grid": root / FLOW_GRID,
         }
 
+    def input_hashes(self, ctx: StageContext) -> dict[str, str]:
+        hashes = super().input_hashes(ctx)
+        if two_way(ctx.scene):  # the coupled fluid: its solver and the flow stage's solution
+            solver = ctx.build_dir / "bin" / "fiberPimpleFoam"
+            hashes["fiberPimpleFoam"] = file_hash(solver) if solver.is_file() else "missing"
+            flow_h5 = ctx.scene.output_path / FLOW_H5
+            hashes["flow_h5"] = file_hash(flow_h5) if flow_h5.is_file() else "missing"
+        return hashes
+
     def preflight(self, ctx: StageContext) -> None:
         for key, p in self.needs(ctx).items():
             if not p.is_file():
@@ -250,6 +298,14 @@ class Laydown(Stage):
                                  "first (fiberform run SCENE runs them in order)")
         if not (ctx.build_dir / "bin" / "fiberdem").is_file():
             raise StageError(f"{ctx.build_dir / 'bin' / 'fiberdem'} not found: build first")
+        if two_way(ctx.scene):
+            if not (ctx.build_dir / "bin" / "fiberPimpleFoam").is_file():
+                raise StageError(f"{ctx.build_dir / 'bin' / 'fiberPimpleFoam'} not found: build "
+                                 "first (coupling.mode two_way)")
+            case = ctx.scene.output_path / "flow" / CASE_DIR
+            if not (case / "constant" / "polyMesh").is_dir():
+                raise StageError(f"{case}: the flow stage's OpenFOAM case is missing (coupling.mode "
+                                 "two_way starts from it): run `fiberform flow` first")
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
         """The working folder: fresh (fibers.data, fibers.nodes, flow.grid copied in) or, with
@@ -258,7 +314,9 @@ class Laydown(Stage):
         scene = ctx.scene
         paths = self.needs(ctx)
         work = self.stage_dir(ctx) / "work"
-        resume_step = resume_point(work, hashes) if ctx.options.get("resume") else None
+        usable = ((lambda step: fluid_state(work, scene, step) is not None) if two_way(scene)
+                  else (lambda step: True))  # fmt: skip
+        resume_step = resume_point(work, hashes, usable) if ctx.options.get("resume") else None
         if resume_step is None:
             if work.exists():
                 shutil.rmtree(work)
@@ -271,6 +329,10 @@ class Laydown(Stage):
             prepare_resume(work, resume_step)
         write_yarns(work / YARNS_NAME, paths["fabric_h5"])
         (work / INPUT_NAME).write_text(render_input(scene, self._superficial_velocity(ctx), resume_step))
+        if two_way(scene) and resume_step is None:
+            prepare_fluid(scene, work)
+        elif two_way(scene):
+            resume_fluid(work, scene, int(resume_step))
         atomic_write_text(work / PREPARED_STEP, json.dumps({"resume_step": resume_step}) + "\n")
 
     def _superficial_velocity(self, ctx: StageContext) -> float:
@@ -279,6 +341,8 @@ class Laydown(Stage):
 
     def programs(self, ctx: StageContext) -> list[Program]:
         argv, ranks = launch(ctx.scene, ctx.build_dir)
+        if two_way(ctx.scene):  # one mpirun (MPMD) for fiberdem and fiberPimpleFoam
+            argv, ranks = coupled_launch(ctx.scene, ctx.build_dir, ctx.oversubscribe), 1
         steps_per_check, checks = run_lengths(ctx.scene)
         work = (self.stage_dir(ctx) / "work").resolve()
         return [Program(tuple(argv), ranks, work, work / LOG_NAME, liggghts_progress(steps_per_check * checks))]
@@ -415,6 +479,33 @@ class Laydown(Stage):
             write_dataset(snap, "settle_fiber_speed", settle_speeds, "m/s",
                           f"fiber centre-of-mass speed below which {q:g} of the mass moves, per snapshot")
 
+        def settled_mass(columns: Mapping[str, Any]) -> float:
+            m, v = fiber_com_speeds(columns)
+            return float(np.sum(m[v < v_settle]))
+
+        # step 0: the fibers are placed at rest, not settled
+        growth = np.array([settled_mass(fr.columns) if len(fr.ids) and fr.step > 0 else 0.0
+                           for fr in frames])
+        write_dataset(snap, "settled_grammage", growth / area, "kg/m^2",
+                      "mass of the fibers whose centre-of-mass speed is below the settle speed, per "
+                      "fabric area, per snapshot (the sheet's growth; 0 at step 0)")
+        drain_lines: list[str] = []
+        if two_way(scene):
+            t_q, q_out = read_patch_history(work / FLUID_CASE, DRAINAGE_FO["bottom"])
+            dr = h5.create_group("drainage")
+            write_dataset(dr, "time", t_q, "s", "fluid time after each coupled fluid step")
+            write_dataset(dr, "flow_rate", q_out, "m^3/s", "volume flow out through the bottom (through "
+                          "fabric and sheet) after each fluid step")
+            write_dataset(dr, "superficial_velocity", q_out / area, "m/s", "flow_rate / fabric area")
+            stride = max(1, len(t_q) // 10)
+            drain_lines = ["", "Drainage (two-way coupling; flow stage: "
+                           f"{u_s * 1e3:.4g} mm/s) next to the sheet's growth:", "",
+                           "| time (ms) | superficial velocity (mm/s) | settled grammage (g/m^2) |",
+                           "|---|---|---|"]
+            steps = np.array([fr.step for fr in frames]) * ld.timestep_s
+            for k in range(0, len(t_q), stride):
+                g_k = growth[np.searchsorted(steps, t_q[k], side="right") - 1] / area if len(steps) else 0.0
+                drain_lines.append(f"| {t_q[k] * 1e3:.3f} | {q_out[k] / area * 1e3:.4g} | {g_k * 1e3:.4g} |")
         write_sheet_vtu(tmp[VTU_NAME], xs, fid_s, offsets)
         final = work / SHEET_RESTART
         if not final.is_file():
@@ -460,11 +551,77 @@ class Laydown(Stage):
             f"- fiberdem wall time: {wall:.1f} s on {ld.ranks} rank(s)"
             + (f" (this part: resumed from the restart file of step {resume_step})"
                if resume_step is not None else ""), "",
+            *drain_lines, "",
             "Approximations:", "", *[f"- {a}" for a in approximations(scene)], "",
             f"Pictures: `{PNG_NAME}`; ParaView: `{VTU_NAME}`; data: `{H5_NAME}`; log: "
             f"`work/{LOG_NAME}`.",
         ]
         tmp[REPORT_NAME].write_text("\n".join(lines) + "\n")
+
+
+def prepare_fluid(scene: Scene, work: Path) -> None:
+    """The coupled fluid's case in ``work/fluid``: the flow stage's case with its steady solution
+    as time 0, transient controls, and the exchange map onto flow.grid's grid
+    (fiberform.coupling_map)."""
+    from foamlib import FoamFieldFile
+
+    ld, cp = scene.laydown, scene.coupling
+    assert ld is not None and cp is not None
+    flow_case = scene.output_path / "flow" / CASE_DIR
+    # the fluid writes its state (binary, exact) at every restart file of the fibers
+    case = prepare_coupled_case(flow_case, work / FLUID_CASE, cp.interval * ld.timestep_s,
+                                restart_every(scene) // cp.interval)
+    run(["postProcess", "-func", "writeCellCentres", "-time", "0"], Path("log.writeCellCentres"),
+        cwd=case, description="writeCellCentres")
+    C = np.asarray(FoamFieldFile(case / "0" / "C").internal_field, dtype=np.float64).reshape(-1, 3)
+    for name in ("C", "Cx", "Cy", "Cz"):
+        (case / "0" / name).unlink(missing_ok=True)
+    with h5py.File(scene.output_path / FLOW_H5, "r") as fh:
+        lattice = tuple(np.asarray(fh[f"lattice/{a}"][...], dtype=np.float64) for a in "xyz")
+        grid = ExchangeGrid(fh["grid/origin"][...], fh["grid/spacing"][...],
+                            tuple(int(n) for n in fh["grid/shape"][...]))
+    cells, weights, target = exchange_map(grid, lattice, C)  # type: ignore[arg-type]
+    write_exchange_map(case / "constant" / MAP_NAME, grid, len(C), cells, weights, target)
+
+
+def fluid_state(work: Path, scene: Scene, step: int) -> Path | None:
+    """The coupled fluid's time folder of fiber step ``step`` (time step x timestep_s), if written."""
+    ld, cp = scene.laydown, scene.coupling
+    assert ld is not None and cp is not None
+    t = step * ld.timestep_s
+    case = work / FLUID_CASE
+    if not case.is_dir():
+        return None
+    for d in case.iterdir():
+        try:
+            if d.is_dir() and abs(float(d.name) - t) <= 1e-6 * cp.interval * ld.timestep_s:
+                return d if (d / "U").is_file() and (d / "phi").is_file() else None
+        except ValueError:
+            continue
+    return None
+
+
+def resume_fluid(work: Path, scene: Scene, step: int) -> None:
+    """Cut the coupled fluid back to its state at fiber step ``step``: later time folders and
+    drainage records go, the fibers' source of that state is dropped (it is recomputed from the
+    first reaction; a fiberSource file would be read as a background force), and the fluid starts
+    from the latest time left."""
+    from foamlib import FoamFile
+
+    state = fluid_state(work, scene, step)
+    assert state is not None
+    t = float(state.name)
+    case = work / FLUID_CASE
+    for d in list(case.iterdir()) + list((case / "postProcessing").glob("*/*")):
+        try:
+            later = float(d.name) > t if d.parent == case else float(d.name) >= t
+        except ValueError:
+            continue
+        if d.is_dir() and later:
+            shutil.rmtree(d)
+    (state / "fiberSource").unlink(missing_ok=True)
+    with FoamFile(case / "system" / "controlDict") as c:
+        c["startFrom"] = "latestTime"
 
 
 def restart_steps(work: Path) -> list[int]:
@@ -490,10 +647,12 @@ def dump_steps(path: Path) -> list[int]:
     return [step for step, _ in dump_snapshots(path.read_text(errors="replace"))]
 
 
-def resume_point(work: Path, hashes: Mapping[str, str]) -> int | None:
+def resume_point(work: Path, hashes: Mapping[str, str],
+                 usable: Callable[[int], bool] = lambda step: True) -> int | None:
     """The step to resume a killed lay-down from: the last restart file that is certainly complete
-    (the run wrote a snapshot after it), if the working folder belongs to the same inputs; None:
-    nothing to resume (start over)."""
+    (the run wrote a snapshot after it) and ``usable`` (two_way: the fluid's state of that step
+    exists), if the working folder belongs to the same inputs; None: nothing to resume (start
+    over)."""
     state = work / RESUME_STATE
     if not state.is_file():
         return None
@@ -505,7 +664,7 @@ def resume_point(work: Path, hashes: Mapping[str, str]) -> int | None:
         raise StageError(f"{work}: the restart files belong to other inputs (scene, upstream "
                          "products or fiberdem changed); run without --resume to start over")
     done = max(dump_steps(work / TRAJ_NAME), default=-1)
-    good = [s for s in restart_steps(work) if s < done]
+    good = [s for s in restart_steps(work) if s < done and usable(s)]
     return good[-1] if good else None
 
 
@@ -537,7 +696,12 @@ def approximations(scene: Scene) -> list[str]:
     ld = scene.laydown
     assert ld is not None
     out = [
-        "one-way coupling: the flow through the bare fabric is frozen (fibers do not change it)",
+        (f"two-way coupling (fiberPimpleFoam, from the flow stage's steady solution): exchange every "
+         f"{scene.coupling.interval} steps on flow.grid's grid, the fibers see the fluid of the "
+         "last exchange (held over the interval), the fluid gets the interval-mean drag reaction "
+         "(explicit source; not the fibers' volume fraction; docs/coupling/formulation.md)"
+         if two_way(scene) and scene.coupling is not None else
+         "one-way coupling: the flow through the bare fabric is frozen (fibers do not change it)"),
         (f"fix fiber/beam integrator implicit (generalized-alpha, rho_inf {ld.rho_inf:g}, Newton "
          f"tolerance {ld.newton_tolerance:g}): external loads held over each step (first order), "
          "drag linearly implicit" if ld.beam_integrator == "implicit" else
