@@ -239,6 +239,16 @@ def test_one_and_two_ranks_identical(fiberdem_build: Path, tmp_path: Path) -> No
     assert np.all(diff <= 1e-10 * scale), diff / scale
 
 
+def test_tangent_steps_range(fiberdem_build: Path, tmp_path: Path) -> None:
+    """tangent_steps (modified Newton across steps) takes an integer in [1, 100000]; the error
+    names the keyword and the range."""
+    for value in ("0", "100001"):
+        case = implicit_case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3,
+                             dt=1e-6, steps=1, fix_options=f"tangent_steps {value}")
+        with pytest.raises(RuntimeError, match=r"tangent_steps' must be an integer in \[1, 100000\]"):
+            run_case(fiberdem_build, tmp_path / f"ts{value}", case)
+
+
 def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
     for opts, msg in [("rho_inf 1.5", "rho_inf"), ("newton_max 0", "newton_max"),
                       ("integrator verlet", "integrator"), ("max_split 50", "max_split")]:

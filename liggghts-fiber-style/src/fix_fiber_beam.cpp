@@ -34,6 +34,26 @@ using namespace FixConst;
 namespace bm = fiberform::physics::beam;
 namespace rod = fiberform::physics::rod;
 
+// The factored tangent of every fiber (or contact cluster, keyed by its fiber IDs) solved on this
+// rank, for modified Newton across steps (rod::Tangent, keyword tangent_steps), and the work
+// arrays of implicit_step (kept so that a step does not allocate them anew).
+namespace LAMMPS_NS {
+struct FiberTangents {
+  struct Entry {
+    rod::Tangent tangent;
+    bigint used = -1;  // the last step it was solved in
+  };
+  std::map<std::vector<int>, Entry> map;
+  std::vector<rod::Node> nodes, fnodes;
+  std::vector<rod::Element> elems, felems;
+  std::vector<bm::Vec3> starts;
+  std::vector<std::vector<double>> back;  // return records, per source rank
+  std::vector<double> brecv;
+  std::vector<int> ids, offsets;
+  std::vector<const double *> recs;
+};
+}  // namespace LAMMPS_NS
+
 namespace {
 
 constexpr int kRecordCols = 19;  // id fiber node count a1 a2 b1 b2 x0 y0 z0 q0(4) q(4)
@@ -66,7 +86,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
   scalar_flag = 1;
   extscalar = 1;
   vector_flag = 1;
-  size_vector = 17;
+  size_vector = 20;
   extvector = 0;
   global_freq = 1;
   comm_forward = NSTATIC > kDynamicComm ? NSTATIC : kDynamicComm;
@@ -83,6 +103,17 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     if (!std::isfinite(v) || v < 0 || (!allow_zero && v == 0)) {
       const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' must be a finite number " +
                             (allow_zero ? ">= 0" : "> 0");
+      error->all(FLERR, fiberform::error_text(m));
+    }
+    return v;
+  };
+  // the integer value of keyword kw at arg[iarg + 1], which must lie in [lo, hi]
+  auto integer_in = [&](int iarg, const char *kw, int lo, int hi) {
+    need(iarg, 1, kw);
+    const int v = force->inumeric(FLERR, arg[iarg + 1]);
+    if (v < lo || v > hi) {
+      const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' must be an integer in [" +
+                            std::to_string(lo) + ", " + std::to_string(hi) + "]";
       error->all(FLERR, fiberform::error_text(m));
     }
     return v;
@@ -157,16 +188,13 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       newton_tol_ = positive(force->numeric(FLERR, arg[iarg + 1]), kw, false);
       iarg += 2;
     } else if (std::strcmp(kw, "newton_max") == 0) {
-      need(iarg, 1, kw);
-      newton_max_ = force->inumeric(FLERR, arg[iarg + 1]);
-      if (newton_max_ < 1 || newton_max_ > 1000)
-        error->all(FLERR, "fix fiber/beam: keyword 'newton_max' must be an integer in [1, 1000]");
+      newton_max_ = integer_in(iarg, kw, 1, 1000);
+      iarg += 2;
+    } else if (std::strcmp(kw, "tangent_steps") == 0) {
+      tangent_steps_ = integer_in(iarg, kw, 1, 100000);
       iarg += 2;
     } else if (std::strcmp(kw, "max_split") == 0) {
-      need(iarg, 1, kw);
-      max_split_ = force->inumeric(FLERR, arg[iarg + 1]);
-      if (max_split_ < 0 || max_split_ > 20)
-        error->all(FLERR, "fix fiber/beam: keyword 'max_split' must be an integer in [0, 20]");
+      max_split_ = integer_in(iarg, kw, 0, 20);
       iarg += 2;
     } else if (std::strcmp(kw, "clamp") == 0) {
       need(iarg, 1, kw);
@@ -184,7 +212,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
                             "' (expected nodes, E, G, density, shear_factor, damping, drag, "
                             "stiffness_scale, inertia_scale, torque, dt_check, integrator, rho_inf, "
-                            "newton_tol, newton_max, max_split, clamp)";
+                            "newton_tol, newton_max, tangent_steps, max_split, clamp)";
       error->all(FLERR, fiberform::error_text(m));
     }
   }
@@ -583,6 +611,10 @@ void FixFiberBeam::pre_neighbor() {
   comm->forward_comm_fix(this);
   comm_mode_ = 0;
   owners_valid_ = false;  // atoms may have migrated
+  // Held tangents are dropped whenever atoms may migrate, on every rank alike: a fiber whose owner
+  // changed would otherwise start on a new tangent on one decomposition and on the held one on
+  // another, and runs on 1 and 2 ranks would differ at the level of the Newton tolerance.
+  if (tangents_) tangents_->map.clear();
 }
 
 void FixFiberBeam::setup_pre_force(int vflag) { pre_force(vflag); }
@@ -896,13 +928,18 @@ void FixFiberBeam::implicit_step() {
       b[S_SRC] = comm->me;
     }
   }
-  rcount_.assign(nprocs, 0);
-  MPI_Alltoall(scount_.data(), 1, MPI_INT, rcount_.data(), 1, MPI_INT, world);
-  rdispl_.assign(nprocs, 0);
-  for (int r = 1; r < nprocs; ++r) rdispl_[r] = rdispl_[r - 1] + rcount_[r - 1];
-  recvbuf_.assign(static_cast<size_t>(rdispl_[nprocs - 1] + rcount_[nprocs - 1]), 0.0);
-  MPI_Alltoallv(sendbuf_.data(), scount_.data(), sdispl_.data(), MPI_DOUBLE, recvbuf_.data(), rcount_.data(),
-                rdispl_.data(), MPI_DOUBLE, world);
+  if (nprocs == 1) {
+    // one rank: the records are already where they are solved (the same bytes as the exchange)
+    std::swap(recvbuf_, sendbuf_);
+  } else {
+    rcount_.assign(nprocs, 0);
+    MPI_Alltoall(scount_.data(), 1, MPI_INT, rcount_.data(), 1, MPI_INT, world);
+    rdispl_.assign(nprocs, 0);
+    for (int r = 1; r < nprocs; ++r) rdispl_[r] = rdispl_[r - 1] + rcount_[r - 1];
+    recvbuf_.assign(static_cast<size_t>(rdispl_[nprocs - 1] + rcount_[nprocs - 1]), 0.0);
+    MPI_Alltoallv(sendbuf_.data(), scount_.data(), sdispl_.data(), MPI_DOUBLE, recvbuf_.data(), rcount_.data(),
+                  rdispl_.data(), MPI_DOUBLE, world);
+  }
 
   // ---- group the received records by fiber, in node order
   const size_t nrec = recvbuf_.size() / S_N;
@@ -923,24 +960,28 @@ void FixFiberBeam::implicit_step() {
   opt.t_damp = t_damp_;
   opt.tau_drag = tau_drag_;
   opt.contact_at_end = contact_at_end_;
+  opt.tangent_steps = tangent_steps_;
   if (!stepper_) stepper_ = std::make_unique<rod::Stepper>();
+  if (!tangents_) tangents_ = std::make_unique<FiberTangents>();
   rod::Stepper &stepper = *stepper_;
-  std::vector<rod::Node> nodes, fnodes;
-  std::vector<rod::Element> elems, felems;
-  std::vector<bm::Vec3> starts;
+  std::vector<rod::Node> &nodes = tangents_->nodes, &fnodes = tangents_->fnodes;
+  std::vector<rod::Element> &elems = tangents_->elems, &felems = tangents_->felems;
+  std::vector<bm::Vec3> &starts = tangents_->starts;
   // return records, per source rank
-  std::vector<std::vector<double>> back(static_cast<size_t>(nprocs));
+  std::vector<std::vector<double>> &back = tangents_->back;
+  back.resize(static_cast<size_t>(nprocs));
+  for (std::vector<double> &b : back) b.clear();
   energy_local_ = 0;
   dissipation_local_ = 0;
-  for (int k = 0; k < 4; ++k) stat_local_[k] = 0;
+  for (int k = 0; k < 5; ++k) stat_local_[k] = 0;
   // fibers solved together (contact clusters, set_clusters), each in ascending fiber ID
   std::map<int, std::vector<int>> clusters;
   for (const auto &kv : fibers) {
     const int fid = kv.first;
     clusters[fid < static_cast<int>(cluster_.size()) && cluster_[fid] >= 0 ? cluster_[fid] : fid].push_back(fid);
   }
-  std::vector<int> ids, offsets;
-  std::vector<const double *> recs;  // the record of every node of the cluster, in node order
+  std::vector<int> &ids = tangents_->ids, &offsets = tangents_->offsets;
+  std::vector<const double *> &recs = tangents_->recs;  // the record of every node of the cluster, in node order
   for (const auto &cl : clusters) {
     nodes.clear();
     elems.clear();
@@ -1010,7 +1051,14 @@ void FixFiberBeam::implicit_step() {
     starts.resize(n);
     for (size_t k = 0; k < n; ++k) starts[k] = nodes[k].x;
     for (rod::NodeForceModel *m : models_) m->begin_cluster(ids, offsets);
-    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt, &models_);
+    // the fiber's (cluster's) held tangent; none kept with tangent_steps 1
+    rod::Tangent *held = nullptr;
+    if (tangent_steps_ > 1) {
+      FiberTangents::Entry &entry = tangents_->map[ids];
+      entry.used = update->ntimestep;
+      held = &entry.tangent;
+    }
+    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt, &models_, held);
     if (!st.ok) {
       double amax = 0, vmax = 0;
       int kmax = 0;
@@ -1037,6 +1085,10 @@ void FixFiberBeam::implicit_step() {
     stat_local_[1] += static_cast<double>(ids.size());
     stat_local_[2] += st.splits;
     stat_local_[3] = std::max(stat_local_[3], static_cast<double>(st.iterations));
+    stat_local_[4] += st.tangents * static_cast<double>(ids.size());
+    stat_run_[0] += st.iterations * static_cast<double>(ids.size());
+    stat_run_[1] += static_cast<double>(ids.size());
+    stat_run_[2] += st.tangents * static_cast<double>(ids.size());
     for (size_t k = 0; k < n; ++k) {
       const double *b = recs[k];
       const rod::Node &nd = nodes[k];
@@ -1061,17 +1113,25 @@ void FixFiberBeam::implicit_step() {
     }
   }
   cluster_.clear();  // set again before every step
-  // ---- return the new states
-  std::vector<int> bcount(nprocs), bdispl(nprocs, 0), rc(nprocs), rd(nprocs, 0);
-  for (int r = 0; r < nprocs; ++r) bcount[r] = static_cast<int>(back[r].size());
-  for (int r = 1; r < nprocs; ++r) bdispl[r] = bdispl[r - 1] + bcount[r - 1];
-  std::vector<double> bsend(static_cast<size_t>(bdispl[nprocs - 1] + bcount[nprocs - 1]));
-  for (int r = 0; r < nprocs; ++r) std::copy(back[r].begin(), back[r].end(), bsend.begin() + bdispl[r]);
-  MPI_Alltoall(bcount.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, world);
-  for (int r = 1; r < nprocs; ++r) rd[r] = rd[r - 1] + rc[r - 1];
-  std::vector<double> brecv(static_cast<size_t>(rd[nprocs - 1] + rc[nprocs - 1]));
-  MPI_Alltoallv(bsend.data(), bcount.data(), bdispl.data(), MPI_DOUBLE, brecv.data(), rc.data(), rd.data(),
-                MPI_DOUBLE, world);
+  // tangents of fibers (clusters) not solved in this step are dropped
+  for (auto it = tangents_->map.begin(); it != tangents_->map.end();)
+    it = it->second.used == update->ntimestep ? std::next(it) : tangents_->map.erase(it);
+  // ---- return the new states (one rank: they are here already)
+  std::vector<double> &brecv = tangents_->brecv;
+  if (nprocs == 1) {
+    brecv.swap(back[0]);
+  } else {
+    std::vector<int> bcount(nprocs), bdispl(nprocs, 0), rc(nprocs), rd(nprocs, 0);
+    for (int r = 0; r < nprocs; ++r) bcount[r] = static_cast<int>(back[r].size());
+    for (int r = 1; r < nprocs; ++r) bdispl[r] = bdispl[r - 1] + bcount[r - 1];
+    std::vector<double> bsend(static_cast<size_t>(bdispl[nprocs - 1] + bcount[nprocs - 1]));
+    for (int r = 0; r < nprocs; ++r) std::copy(back[r].begin(), back[r].end(), bsend.begin() + bdispl[r]);
+    MPI_Alltoall(bcount.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, world);
+    for (int r = 1; r < nprocs; ++r) rd[r] = rd[r - 1] + rc[r - 1];
+    brecv.resize(static_cast<size_t>(rd[nprocs - 1] + rc[nprocs - 1]));
+    MPI_Alltoallv(bsend.data(), bcount.data(), bdispl.data(), MPI_DOUBLE, brecv.data(), rc.data(), rd.data(),
+                  MPI_DOUBLE, world);
+  }
   for (size_t o = 0; o + R_N <= brecv.size(); o += R_N) {
     const double *r = &brecv[o];
     const int i = atom->map(static_cast<int>(r[R_TAG]));
@@ -1097,7 +1157,9 @@ void FixFiberBeam::implicit_step() {
    inertia of this fix), 4 total, 5 damping power (W), 6 critical step (min), 7-10 critical steps
    axial, shear, bending, torsion, 11 stiffness_scale, 12 inertia_scale, 13 damping time,
    14 mean Newton iterations per fiber in the last step, 15 largest Newton iterations of a fiber in
-   the last step, 16 sub-step splits in the last step (implicit), 17 rho_inf (-1: explicit)
+   the last step, 16 sub-step splits in the last step (implicit), 17 rho_inf (-1: explicit),
+   18 mean tangent formations (factorisations) per fiber in the last step, 19 and 20 mean Newton
+   iterations and tangent formations per fiber and step since the fix was created
 ------------------------------------------------------------------------- */
 
 double FixFiberBeam::compute_scalar() {
@@ -1132,17 +1194,24 @@ double FixFiberBeam::compute_vector(int n) {
   if (n == 10) return stiff_scale_;
   if (n == 11) return inertia_scale_;
   if (n == 12) return t_damp_;
-  if (n >= 13 && n <= 15) {
-    // Newton iterations per fiber in the last step, largest per fiber, sub-step splits in the last step
-    double loc[3] = {stat_local_[0], stat_local_[1], stat_local_[2]}, all[3];
-    MPI_Allreduce(loc, all, 3, MPI_DOUBLE, MPI_SUM, world);
+  if ((n >= 13 && n <= 15) || n == 17) {
+    // Newton iterations per fiber in the last step, largest per fiber, sub-step splits in the last
+    // step, tangent formations per fiber in the last step
+    double loc[4] = {stat_local_[0], stat_local_[1], stat_local_[2], stat_local_[4]}, all[4];
+    MPI_Allreduce(loc, all, 4, MPI_DOUBLE, MPI_SUM, world);
     if (n == 13) return all[1] > 0 ? all[0] / all[1] : 0.0;
+    if (n == 17) return all[1] > 0 ? all[3] / all[1] : 0.0;
     if (n == 15) return all[2];
     double mx = stat_local_[3], gmx = 0;
     MPI_Allreduce(&mx, &gmx, 1, MPI_DOUBLE, MPI_MAX, world);
     return gmx;
   }
   if (n == 16) return implicit_ ? rho_inf_ : -1.0;
+  if (n == 18 || n == 19) {
+    double all[3];
+    MPI_Allreduce(stat_run_, all, 3, MPI_DOUBLE, MPI_SUM, world);
+    return all[1] > 0 ? all[n == 18 ? 0 : 2] / all[1] : 0.0;
+  }
   return 0.0;
 }
 

@@ -32,6 +32,10 @@ class NodeForceModel;
 }
 
 namespace LAMMPS_NS {
+struct FiberTangents;  // factored tangents held from step to step (fix_fiber_beam.cpp)
+}
+
+namespace LAMMPS_NS {
 
 class FixFiberBeam : public Fix {
  public:
@@ -166,17 +170,20 @@ class FixFiberBeam : public Fix {
   bool implicit_ = true;
   double rho_inf_ = 0.5, newton_tol_ = 1e-8;
   int newton_max_ = 25, max_split_ = 8;
+  int tangent_steps_ = 50;      // a factored tangent serves at most this many steps (keyword tangent_steps)
   bool contact_at_end_ = true;  // contact forces at the end of the step only (rod::contact_force_weight)
   int clamp_groupbit_ = 0;
   std::unique_ptr<fiberform::physics::rod::Stepper> stepper_;  // implicit solver workspace
+  std::unique_ptr<FiberTangents> tangents_;  // per fiber/cluster on this rank; dropped when atoms migrate
   std::vector<fiberform::physics::rod::NodeForceModel *> models_;  // not owned
   std::vector<int> owner_;            // owner rank of fiber ID (index), -1 if absent
   std::vector<int> cluster_;          // set_clusters: smallest fiber ID of each fiber's cluster
   bool owners_valid_ = false;
   std::vector<double> sendbuf_, recvbuf_;
   std::vector<int> scount_, rcount_, sdispl_, rdispl_;
-  double stat_local_[4] = {0, 0, 0, 0};  // Newton iterations, fibers solved, splits, max iterations
+  double stat_local_[5] = {0, 0, 0, 0, 0};  // Newton iterations, fibers solved, splits, max iterations, tangents
   double stat_total_splits_ = 0;
+  double stat_run_[3] = {0, 0, 0};  // since the fix was created: Newton iterations, fibers solved, tangents
   std::string nodes_path_;
 
   int ref_done_ = 0;

@@ -28,9 +28,10 @@
        dQ += d / h,  v += gamma' d,  vdot += beta' d,  gamma' = gamma/(h beta),
        beta' = (1 - am)/(h^2 beta (1 - af)).
    Iteration matrix S = beta' M + gamma' C_t + K_t (modified Newton: formed and factored at the
-   first iteration of a step, again after every kRefresh iterations without convergence, and as
-   soon as a correction is not below kContraction times the previous one). K_t: the tangent of the
-   internal forces by forward differences of the exact discrete element forces (12 evaluations per
+   first iteration of a step unless the caller's held one from earlier steps still serves (struct
+   Tangent), again after every kRefresh iterations without convergence, and as soon as a
+   correction is not below kContraction times the previous one). K_t: the tangent of the
+   internal forces by forward differences of the exact discrete element forces (9 evaluations per
    element), multiplied by the right Jacobian of SO(3) at the current rotation increment (the
    tangent operator T(h dQ)); C_t: the gyroscopic, drag and damping tangents. S is block
    tridiagonal in the nodes (6 x 6 blocks); it is solved after a
@@ -43,6 +44,7 @@
 #define FIBERFORM_PHYSICS_IMPLICIT_ROD_H
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <vector>
@@ -186,6 +188,9 @@ struct Options {
   // the NodeForceModels' forces at the end of the step only (contact_force_weight); false: alpha-
   // averaged like the internal forces (the former scheme; kept for comparison)
   bool contact_at_end = true;
+  // a factored tangent serves at most this many steps (with a Tangent passed to Stepper::step;
+  // 1: formed anew in every step)
+  int tangent_steps = 1;
 };
 
 struct Stats {
@@ -205,6 +210,48 @@ inline void skew(const Vec3 &a, double S[9]) {
   S[6] = -a.y; S[7] = a.x; S[8] = 0;
 }
 
+// One column of the rank-one couplings of the iteration matrix (Stepper::build_couplings).
+struct CouplingColumn {
+  int node[4];
+  double u[12];     // scaled g_c at the translational dofs of its nodes
+  int lo[4], hi[4]; // node ranges (fibers) Z is computed on
+  int nr = 0;
+  std::vector<double> z;  // T^-1 g_c on those ranges, 6 values per node
+  double zval(int k, int d) const {
+    int off = 0;
+    for (int r = 0; r < nr; ++r) {
+      if (k >= lo[r] && k < hi[r]) return z[static_cast<std::size_t>(6 * (off + k - lo[r]) + d)];
+      off += hi[r] - lo[r];
+    }
+    return 0.0;
+  }
+};
+
+// The factored iteration matrix of one fiber (or contact cluster) and what it was formed with.
+// Modified Newton ACROSS steps (docs/models/beam.md, "Cost"): the caller keeps one Tangent per
+// fiber and passes it to Stepper::step; a step starts on it instead of forming a new one when
+// it is younger than Options::tangent_steps steps, the step size, the scheme's coefficients, the
+// clamped nodes and the damping/drag times are those it was formed with, no node has turned by
+// more than Stepper::kReuseTurn since, and the velocity Jacobian D of the external forces and the
+// derivatives of the NodeForceModels changed by at most Stepper::kModelChange times the matrix's
+// translational diagonal. Inside the step the contraction test decides as before (a correction
+// not below kContraction times the previous one forms a new tangent). Contents are private to the
+// Stepper; a default-constructed Tangent holds none.
+struct Tangent {
+  int age = -1;  // successful steps since it was formed; -1: none held
+  // step h (s) and the coefficients of the iteration matrix it was formed with (Stepper::attempt)
+  std::array<double, 6> coef{};  // h, gp, bp, kfac, inv_tau, wc
+  std::vector<char> fixed;     // clamped nodes
+  std::vector<double> drag;    // D of every node (6 values), N s/m
+  std::vector<Quat> q;         // frames of the nodes
+  ForceJacobian jac;           // the models' derivatives
+  std::vector<double> D, L, U, scale;  // scaled block factors, the symmetric diagonal scaling
+  std::vector<int> piv;
+  std::vector<CouplingColumn> cols;    // Woodbury couplings and their capacitance factors
+  std::vector<double> cap;
+  std::vector<int> cpiv;
+};
+
 class Stepper {
  public:
   static constexpr double kMaxTurn = 0.5;      // rad: largest rotation correction of one iteration
@@ -212,6 +259,10 @@ class Stepper {
   static constexpr int kRefresh = 4;           // iterations on one tangent before it is formed again
   static constexpr double kContraction = 0.25; // a correction larger than this x the previous one: new tangent
   static constexpr int kMaxBacktracks = 12;    // halvings of one correction whose residual grew
+  static constexpr double kReuseTurn = 0.1;    // rad: a node turned further since a held tangent: form anew
+  static constexpr double kCosHalfReuseTurn = 0.99875026039496628;  // cos(kReuseTurn / 2)
+  static constexpr double kModelChange = 0.1;  // model/drag derivatives changed by more than this x the
+                                               // translational diagonal since a held tangent: form anew
   // Start of the integration. consistent = true: initial accelerations from all forces,
   // vdot = (F_int + F)/m, J Wdot = R^T (T_int + T) - W x J W, a = vdot (exact start; use it when
   // the step resolves every mode of the fiber). consistent = false: from the EXTERNAL loads only.
@@ -240,13 +291,21 @@ class Stepper {
 
   // One step of length h. On failure the nodes are left at their input state and ok = false.
   // models: forces evaluated inside the Newton iteration (may be null or empty).
+  // keep: the fiber's factored tangent from earlier steps (may be null: a new one in every step);
+  // the step starts on it when it still serves (struct Tangent) and leaves its last one there.
   Stats step(std::vector<Node> &nodes, const std::vector<Element> &elems, double h, const GenAlpha &g,
-             const Options &opt, const std::vector<NodeForceModel *> *models = nullptr) {
+             const Options &opt, const std::vector<NodeForceModel *> *models = nullptr, Tangent *keep = nullptr) {
     models_ = models;
+    if (keep) std::swap(tg_, *keep);
+    else tg_.age = -1;
     Stats st;
-    saved_ = nodes;
+    // the start of every halving level (allocated once: advance keeps references into it)
+    if (starts_.size() < static_cast<std::size_t>(opt.max_split) + 1) starts_.resize(opt.max_split + 1);
     st.ok = advance(nodes, elems, 0.0, h, g, opt, 0, st);
-    if (!st.ok) nodes = saved_;
+    if (!st.ok) nodes = starts_[0];
+    if (!st.ok) tg_.age = -1;
+    else if (tg_.age >= 0) ++tg_.age;
+    if (keep) std::swap(tg_, *keep);
     return st;
   }
 
@@ -293,15 +352,21 @@ class Stepper {
 
   // Element tangent (12 x 12, row-major) d(residual)/d(dx_A, dth_A, dx_B, dth_B) by forward
   // differences from the residual r0 at the current state (translations spatial, rotations
-  // body-frame right perturbations): 12 element evaluations. Truncation error O(step): relative
-  // 1e-7 here, far below what modified Newton tolerates (central differences cost twice as much
-  // for no measurable change in iterations).
+  // body-frame right perturbations). The element forces depend on the translations only through
+  // d = x_B - x_A (and v_B - v_A), so the x_B columns are minus the x_A ones: 9 element
+  // evaluations (3 x_A, 3 + 3 rotations). Truncation error O(step): relative 1e-7 here, far below
+  // what modified Newton tolerates (central differences cost twice as much for no measurable
+  // change in iterations).
   static void element_tangent(const beam::NodeState &A, const beam::NodeState &B, const Element &el,
                               double t_damp, const double r0[12], double K[144]) {
     const double hx = 1e-7 * el.ref.L0;  // m
     const double hr = 1e-7;              // rad
     double rp[12];
     for (int c = 0; c < 12; ++c) {
+      if (c >= 6 && c < 9) {  // x_B: minus the x_A column
+        for (int r = 0; r < 12; ++r) K[r * 12 + c] = -K[r * 12 + c - 6];
+        continue;
+      }
       beam::NodeState Ap = A, Bp = B;
       beam::NodeState &P = c < 6 ? Ap : Bp;
       const int k = c % 6;
@@ -343,6 +408,91 @@ class Stepper {
     }
   }
 
+  // what the tangent just formed was formed with (struct Tangent); the models' derivatives only
+  // when there are models (none: an empty jac, which model_change treats as changed)
+  void remember_tangent(const std::vector<Node> &nodes, double h, double gp, double bp, double kfac,
+                        double inv_tau, double wc, bool have_models) {
+    const std::size_t n = nodes.size();
+    tg_.age = 0;
+    tg_.coef = {h, gp, bp, kfac, inv_tau, wc};
+    tg_.fixed.resize(n);
+    tg_.drag.resize(6 * n);
+    tg_.q.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      tg_.fixed[k] = nodes[k].fixed;
+      std::copy(nodes[k].D, nodes[k].D + 6, &tg_.drag[6 * k]);
+      tg_.q[k] = nodes[k].q;
+    }
+    if (have_models) tg_.jac = jac_;
+    else tg_.jac = ForceJacobian{};
+  }
+
+  // the held tangent may start this attempt (struct Tangent); the models are checked separately
+  // (model_change) once they have been evaluated
+  bool held_tangent_serves(const std::vector<Node> &nodes, double h, double gp, double bp, double kfac,
+                           double inv_tau, double wc, const Options &opt, bool have_models) const {
+    const std::size_t n = nodes.size();
+    if (tg_.age < 0 || tg_.age >= opt.tangent_steps || tg_.fixed.size() != n) return false;
+    if (have_models != !tg_.jac.Kd.empty()) return false;  // force models registered or removed since
+    if (tg_.coef != std::array<double, 6>{h, gp, bp, kfac, inv_tau, wc}) return false;
+    for (std::size_t k = 0; k < n; ++k) {
+      if (static_cast<bool>(tg_.fixed[k]) != nodes[k].fixed) return false;
+      if (nodes[k].fixed) continue;
+      // turned by more than kReuseTurn: |q0 . q| = cos(angle / 2)
+      const Quat &a = tg_.q[k], &b = nodes[k].q;
+      if (std::fabs(a.w * b.w + a.x * b.x + a.y * b.y + a.z * b.z) < kCosHalfReuseTurn) return false;
+      // drag: S += gp D (translational block)
+      const double diag = translational_diagonal(k);
+      for (int i = 0; i < 6; ++i)
+        if (!(gp * std::fabs(nodes[k].D[i] - tg_.drag[6 * k + i]) <= kModelChange * diag)) return false;
+    }
+    return true;
+  }
+
+  // smallest translational diagonal entry of the held (unscaled) iteration matrix at node k
+  double translational_diagonal(std::size_t k) const {
+    double d = INFINITY;
+    for (int i = 0; i < 3; ++i) d = std::min(d, 1.0 / (tg_.scale[6 * k + i] * tg_.scale[6 * k + i]));
+    return d;
+  }
+
+  // largest change of the models' part of the iteration matrix, -wc (dF/dx + gp dF/dv), between
+  // the held tangent's derivatives and jac_ (just evaluated), relative to the translational
+  // diagonal of the held matrix; INFINITY when the set of couplings changed
+  double model_change(const std::vector<Node> &nodes, double gp, double wc) const {
+    const std::size_t n = nodes.size();
+    const ForceJacobian &a = jac_, &b = tg_.jac;
+    if (b.Kd.size() != a.Kd.size() || b.couplings.size() != a.couplings.size()) return INFINITY;
+    double worst = 0.0;
+    for (std::size_t k = 0; k < n; ++k) {
+      if (nodes[k].fixed) continue;
+      const double inv = 1.0 / translational_diagonal(k);
+      for (std::size_t q = 9 * k; q < 9 * k + 9; ++q) {
+        const double dd = (a.Kd[q] - b.Kd[q]) + gp * (a.Cd[q] - b.Cd[q]);
+        const double dl = (a.Kl[q] - b.Kl[q]) + gp * (a.Cl[q] - b.Cl[q]);
+        const double du = (a.Ku[q] - b.Ku[q]) + gp * (a.Cu[q] - b.Cu[q]);
+        worst = std::max(worst, wc * std::max({std::fabs(dd), std::fabs(dl), std::fabs(du)}) * inv);
+      }
+    }
+    for (std::size_t c = 0; c < a.couplings.size(); ++c) {
+      const ForceJacobian::Coupling &ca = a.couplings[c], &cb = b.couplings[c];
+      double w2 = 0.0, diag = INFINITY;
+      for (int i = 0; i < 4; ++i) {
+        if (ca.node[i] != cb.node[i]) return INFINITY;
+        w2 = std::max({w2, ca.w[i] * ca.w[i], cb.w[i] * cb.w[i]});
+        if (!nodes[ca.node[i]].fixed) diag = std::min(diag, translational_diagonal(ca.node[i]));
+      }
+      // kappa n n^T as it enters the matrix (kappa <= 0 is left out: build_couplings)
+      const double ka = std::max(0.0, -wc * (ca.dFdh + gp * ca.dFdu));
+      const double kb = std::max(0.0, -wc * (cb.dFdh + gp * cb.dFdu));
+      double dm = 0.0;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) dm = std::max(dm, std::fabs(ka * ca.n[i] * ca.n[j] - kb * cb.n[i] * cb.n[j]));
+      if (std::isfinite(diag)) worst = std::max(worst, dm * w2 / diag);
+    }
+    return worst;
+  }
+
   // a Newton correction dx (m), dth (rad, body) of node k: increments and the scheme's relations
   void correct(Node &nd, std::size_t k, Vec3 dx, Vec3 dth, double h, double gp, double bp) {
     dQx_[k] = dQx_[k] + (1.0 / h) * dx;
@@ -364,8 +514,15 @@ class Stepper {
   bool advance(std::vector<Node> &nodes, const std::vector<Element> &elems, double t0, double h,
                const GenAlpha &g, const Options &opt, int depth, Stats &st) {
     st.depth = std::max(st.depth, depth);
-    const std::vector<Node> start = nodes;
+    std::vector<Node> &start = starts_[static_cast<std::size_t>(depth)];
+    start = nodes;
     if (attempt(nodes, start, elems, t0, h, g, opt, st)) return true;
+    if (started_held_) {
+      // it started on a held tangent: once more with a new one before the step is split
+      nodes = start;
+      tg_.age = -1;
+      if (attempt(nodes, start, elems, t0, h, g, opt, st)) return true;
+    }
     if (depth >= opt.max_split) return false;
     nodes = start;
     ++st.splits;
@@ -408,12 +565,12 @@ class Stepper {
     }
     set_positions(nodes, start, h);
 
-    Dm_.assign(n * blocktri::kBB, 0.0);
-    Lm_.assign(n * blocktri::kBB, 0.0);
-    Um_.assign(n * blocktri::kBB, 0.0);
     rhs_.assign(n * 6, 0.0);
-    piv_.assign(n * 6, 0);
-    scale_.assign(n * 6, 1.0);
+    const double kfac = 1.0 + gp * opt.t_damp;  // Kelvin-Voigt: damping tangent ~ t_d K
+    // modified Newton across steps: start on the held tangent if it still serves (struct Tangent)
+    bool reuse = held_tangent_serves(nodes, h, gp, bp, kfac, inv_tau, wc, opt, have_models);
+    started_held_ = reuse;
+    if (!reuse) tg_.scale.assign(n * 6, 1.0);
     double Ke[144], re[12];
     int since_tangent = 0;
     bool slow = false;         // the last correction did not shrink fast enough: form a new tangent
@@ -423,21 +580,35 @@ class Stepper {
     int backtracks = 0;
     for (int it = 0; it < opt.max_iter; ++it) {
       ++st.iterations;
-      // modified Newton: the tangent is formed and factored at the first iteration and again
-      // whenever kRefresh iterations have not converged
-      const bool tangent = it == 0 || since_tangent >= kRefresh || slow;
+      // modified Newton: the tangent is formed and factored at the first iteration (unless a held
+      // one serves) and again whenever kRefresh iterations have not converged
+      bool tangent = (it == 0 && !reuse) || since_tangent >= kRefresh || slow;
+      // forces of the models at the current iterate (and their tangent); at the first iteration on
+      // a held tangent their derivatives decide whether it still serves
+      const bool want_jac = tangent || (it == 0 && have_models);
+      Fc_.assign(n, Vec3{});
+      if (want_jac) jac_.reset(n);
+      if (have_models) {
+        for (NodeForceModel *m : *models_) m->evaluate(nodes, Fc_, want_jac ? &jac_ : nullptr);
+      }
+      if (!tangent && it == 0 && have_models && !(model_change(nodes, gp, wc) <= kModelChange)) tangent = true;
       since_tangent = tangent ? 1 : since_tangent + 1;
       if (tangent) {
         ++st.tangents;
-        std::fill(Dm_.begin(), Dm_.end(), 0.0);
-        std::fill(Lm_.begin(), Lm_.end(), 0.0);
-        std::fill(Um_.begin(), Um_.end(), 0.0);
+        if (it == 0) started_held_ = false;
+        tg_.age = -1;  // none held until this one is factored (remember_tangent)
+        tg_.D.assign(n * blocktri::kBB, 0.0);
+        tg_.L.assign(n * blocktri::kBB, 0.0);
+        tg_.U.assign(n * blocktri::kBB, 0.0);
+        tg_.piv.assign(n * 6, 0);
       }
       std::fill(rhs_.begin(), rhs_.end(), 0.0);
       // internal forces (and their tangent)
+      ns_.resize(n);
+      for (std::size_t k = 0; k < n; ++k) ns_[k] = state(nodes[k]);
       for (std::size_t e = 0; e + 1 < n; ++e) {
         if (!nodes[e].next) continue;  // the last node of a fiber in a cluster
-        const beam::NodeState A = state(nodes[e]), B = state(nodes[e + 1]);
+        const beam::NodeState &A = ns_[e], &B = ns_[e + 1];
         element_residual(A, B, elems[e], opt.t_damp, re);
         for (int r = 0; r < 6; ++r) {
           rhs_[e * 6 + r] += re[r];
@@ -449,31 +620,24 @@ class Stepper {
         // Jacobian of SO(3) at the current increment (the tangent operator T(h dQ) of Bruels et al.)
         right_jacobian_columns(Ke, 3, h * dQw_[e]);
         right_jacobian_columns(Ke, 9, h * dQw_[e + 1]);
-        const double kfac = 1.0 + gp * opt.t_damp;  // Kelvin-Voigt: damping tangent ~ t_d K
         for (int r = 0; r < 6; ++r)
           for (int c = 0; c < 6; ++c) {
-            Dm_[e * 36 + r * 6 + c] += kfac * Ke[r * 12 + c];
-            Um_[e * 36 + r * 6 + c] += kfac * Ke[r * 12 + 6 + c];
-            Lm_[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + c];
-            Dm_[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + 6 + c];
+            tg_.D[e * 36 + r * 6 + c] += kfac * Ke[r * 12 + c];
+            tg_.U[e * 36 + r * 6 + c] += kfac * Ke[r * 12 + 6 + c];
+            tg_.L[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + c];
+            tg_.D[(e + 1) * 36 + r * 6 + c] += kfac * Ke[(6 + r) * 12 + 6 + c];
           }
-      }
-      // forces of the models at the current iterate (and their tangent)
-      Fc_.assign(n, Vec3{});
-      if (tangent) jac_.reset(n);
-      if (have_models) {
-        for (NodeForceModel *m : *models_) m->evaluate(nodes, Fc_, tangent ? &jac_ : nullptr);
       }
       // inertia, external forces, drag
       for (std::size_t k = 0; k < n; ++k) {
         Node &nd = nodes[k];
         const Node &s = start[k];
-        double *Dk = &Dm_[k * 36];
+        double *Dk = &tg_.D[k * 36];
         double *rk = &rhs_[k * 6];
         if (nd.fixed) {
           for (int i = 0; i < 6; ++i) rk[i] = 0.0;
           if (tangent) {
-            for (int i = 0; i < 36; ++i) Dk[i] = Um_[k * 36 + i] = Lm_[k * 36 + i] = 0.0;
+            for (int i = 0; i < 36; ++i) Dk[i] = tg_.U[k * 36 + i] = tg_.L[k * 36 + i] = 0.0;
             for (int i = 0; i < 6; ++i) Dk[i * 7] = 1.0;
           }
           continue;
@@ -508,7 +672,7 @@ class Stepper {
         }
         if (!have_models) continue;
         // the models' forces: S += -wc (dF/dx + gp dF/dv) (translational blocks)
-        double *Lk = &Lm_[k * 36], *Uk = &Um_[k * 36];
+        double *Lk = &tg_.L[k * 36], *Uk = &tg_.U[k * 36];
         for (int i = 0; i < 3; ++i)
           for (int j = 0; j < 3; ++j) {
             const std::size_t q = 9 * k + 3 * i + j;
@@ -521,9 +685,9 @@ class Stepper {
       // across a kink of a contact law, e.g. the clip of the steric servo, and Newton would cycle
       // between both sides) is halved and the residual evaluated again. Norm: the residual scaled as
       // the system.
-      {
+      if (have_models) {
         double rn = 0.0;
-        for (std::size_t q = 0; q < n * 6; ++q) rn += rhs_[q] * rhs_[q] * scale_[q] * scale_[q];
+        for (std::size_t q = 0; q < n * 6; ++q) rn += rhs_[q] * rhs_[q] * tg_.scale[q] * tg_.scale[q];
         if (have_models && fresh && it > 0 && rn > last_rn * (1.0 + 1e-9) && backtracks < kMaxBacktracks &&
             std::isfinite(last_rn)) {
           ++backtracks;
@@ -544,33 +708,34 @@ class Stepper {
         // symmetric diagonal scaling, then the block factorisation
         for (std::size_t k = 0; k < n; ++k)
           for (int i = 0; i < 6; ++i) {
-            const double dii = std::fabs(Dm_[k * 36 + i * 7]);
-            scale_[k * 6 + i] = dii > 0 && std::isfinite(dii) ? 1.0 / std::sqrt(dii) : 1.0;
+            const double dii = std::fabs(tg_.D[k * 36 + i * 7]);
+            tg_.scale[k * 6 + i] = dii > 0 && std::isfinite(dii) ? 1.0 / std::sqrt(dii) : 1.0;
           }
         for (std::size_t k = 0; k < n; ++k) {
-          const double *sk = &scale_[k * 6];
-          const double *sp = k > 0 ? &scale_[(k - 1) * 6] : sk;
-          const double *sn = k + 1 < n ? &scale_[(k + 1) * 6] : sk;
+          const double *sk = &tg_.scale[k * 6];
+          const double *sp = k > 0 ? &tg_.scale[(k - 1) * 6] : sk;
+          const double *sn = k + 1 < n ? &tg_.scale[(k + 1) * 6] : sk;
           for (int i = 0; i < 6; ++i)
             for (int j = 0; j < 6; ++j) {
-              Dm_[k * 36 + i * 6 + j] *= sk[i] * sk[j];
-              Lm_[k * 36 + i * 6 + j] *= sk[i] * sp[j];
-              Um_[k * 36 + i * 6 + j] *= sk[i] * sn[j];
+              tg_.D[k * 36 + i * 6 + j] *= sk[i] * sk[j];
+              tg_.L[k * 36 + i * 6 + j] *= sk[i] * sp[j];
+              tg_.U[k * 36 + i * 6 + j] *= sk[i] * sn[j];
             }
         }
-        if (!blocktri::factor(static_cast<int>(n), Dm_.data(), Lm_.data(), Um_.data(), piv_.data())) return false;
+        if (!blocktri::factor(static_cast<int>(n), tg_.D.data(), tg_.L.data(), tg_.U.data(), tg_.piv.data())) return false;
         if (!build_couplings(nodes, gp, wc)) return false;
+        remember_tangent(nodes, h, gp, bp, kfac, inv_tau, wc, have_models);
       }
       // solve S d = -r with the (possibly older) factors
-      for (std::size_t q = 0; q < n * 6; ++q) rhs_[q] *= -scale_[q];
-      blocktri::solve_factored(static_cast<int>(n), Dm_.data(), Lm_.data(), Um_.data(), piv_.data(), rhs_.data());
+      for (std::size_t q = 0; q < n * 6; ++q) rhs_[q] *= -tg_.scale[q];
+      blocktri::solve_factored(static_cast<int>(n), tg_.D.data(), tg_.L.data(), tg_.U.data(), tg_.piv.data(), rhs_.data());
       apply_couplings();
       // update; a correction that would rotate a node by more than kMaxTurn is shortened (damped
       // Newton), and a step that turns a node by more than kMaxStepTurn fails (and is split)
       double err = 0.0, turn = 0.0;
       for (std::size_t k = 0; k < n; ++k) {
         double t2 = 0.0;
-        for (int i = 0; i < 3; ++i) t2 += std::pow(rhs_[k * 6 + 3 + i] * scale_[k * 6 + 3 + i], 2);
+        for (int i = 0; i < 3; ++i) t2 += std::pow(rhs_[k * 6 + 3 + i] * tg_.scale[k * 6 + 3 + i], 2);
         turn = std::max(turn, std::sqrt(t2));
       }
       if (!std::isfinite(turn)) return false;
@@ -580,7 +745,7 @@ class Stepper {
         dxs_.assign(n, Vec3{});
         for (std::size_t k = 0; k < n; ++k)
           if (!nodes[k].fixed)
-            for (int i = 0; i < 3; ++i) dxs_[k][i] = damp * rhs_[k * 6 + i] * scale_[k * 6 + i];
+            for (int i = 0; i < 3; ++i) dxs_[k][i] = damp * rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
         double frac = 1.0;
         for (NodeForceModel *m : *models_) frac = std::min(frac, m->limit(nodes, dxs_));
         if (!(frac > 0.0)) return false;
@@ -591,8 +756,8 @@ class Stepper {
         if (nd.fixed) continue;
         Vec3 dx, dth;
         for (int i = 0; i < 3; ++i) {
-          dx[i] = damp * rhs_[k * 6 + i] * scale_[k * 6 + i];
-          dth[i] = damp * rhs_[k * 6 + 3 + i] * scale_[k * 6 + 3 + i];
+          dx[i] = damp * rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
+          dth[i] = damp * rhs_[k * 6 + 3 + i] * tg_.scale[k * 6 + 3 + i];
         }
         if (!std::isfinite(dx.x + dx.y + dx.z + dth.x + dth.y + dth.z)) return false;
         err = std::max(err, std::max(beam::norm(dx) / nd.scale, beam::norm(dth)));
@@ -605,7 +770,7 @@ class Stepper {
       const double full = damp > 0.0 ? err / damp : err;
       slow = !(full <= kContraction * prev_err);
       prev_err = full;
-      fresh = tangent;
+      fresh = tangent || (it == 0 && started_held_);  // a held tangent that passed the checks counts as new
       if (!(full <= opt.tol)) continue;
       for (std::size_t k = 0; k < n; ++k)
         if (h * beam::norm(dQw_[k]) > kMaxStepTurn) return false;
@@ -638,24 +803,9 @@ class Stepper {
   // S^-1 r = y - Z (K^-1 + G^T Z)^-1 G^T y with y = T^-1 r, Z = T^-1 G: one solve per coupling over
   // the fibers it touches, and a dense LU of the (couplings x couplings) capacitance matrix.
   // Terms with kappa <= 0 (attraction) are left out of the iteration matrix (modified Newton).
-  struct WCol {
-    int node[4];
-    double u[12];     // scaled g_c at the translational dofs of its nodes
-    int lo[4], hi[4]; // node ranges (fibers) Z is computed on
-    int nr = 0;
-    std::vector<double> z;  // T^-1 g_c on those ranges, 6 values per node
-    double zval(int k, int d) const {
-      int off = 0;
-      for (int r = 0; r < nr; ++r) {
-        if (k >= lo[r] && k < hi[r]) return z[static_cast<std::size_t>(6 * (off + k - lo[r]) + d)];
-        off += hi[r] - lo[r];
-      }
-      return 0.0;
-    }
-  };
 
   bool build_couplings(const std::vector<Node> &nodes, double gp, double wc) {
-    wcols_.clear();
+    tg_.cols.clear();
     if (jac_.couplings.empty()) return true;
     const int n = static_cast<int>(nodes.size());
     // fiber ranges
@@ -672,11 +822,11 @@ class Stepper {
     for (const ForceJacobian::Coupling &c : jac_.couplings) {
       const double kappa = -wc * (c.dFdh + gp * c.dFdu);
       if (!(kappa > 0.0) || !std::isfinite(kappa)) continue;
-      WCol w;
+      CouplingColumn w;
       for (int i = 0; i < 4; ++i) {
         w.node[i] = c.node[i];
         for (int d = 0; d < 3; ++d)
-          w.u[3 * i + d] = nodes[c.node[i]].fixed ? 0.0 : scale_[6 * c.node[i] + d] * c.w[i] * c.n[d];
+          w.u[3 * i + d] = nodes[c.node[i]].fixed ? 0.0 : tg_.scale[6 * c.node[i] + d] * c.w[i] * c.n[d];
         bool have = false;
         for (int r = 0; r < w.nr; ++r) have = have || w.lo[r] == flo_[c.node[i]];
         if (!have) {
@@ -692,38 +842,38 @@ class Stepper {
           if (w.node[i] >= w.lo[r] && w.node[i] < w.hi[r])
             for (int d = 0; d < 3; ++d) w.z[off + 6 * (w.node[i] - w.lo[r]) + d] += w.u[3 * i + d];
         const std::size_t lo = static_cast<std::size_t>(w.lo[r]);
-        blocktri::solve_factored(w.hi[r] - w.lo[r], &Dm_[36 * lo], &Lm_[36 * lo], &Um_[36 * lo], &piv_[6 * lo],
+        blocktri::solve_factored(w.hi[r] - w.lo[r], &tg_.D[36 * lo], &tg_.L[36 * lo], &tg_.U[36 * lo], &tg_.piv[6 * lo],
                                  &w.z[off]);
       }
-      wcols_.push_back(std::move(w));
+      tg_.cols.push_back(std::move(w));
       kinv.push_back(1.0 / kappa);
     }
-    const std::size_t m = wcols_.size();
-    cap_.assign(m * m, 0.0);
+    const std::size_t m = tg_.cols.size();
+    tg_.cap.assign(m * m, 0.0);
     for (std::size_t a = 0; a < m; ++a) {
-      cap_[a * m + a] = kinv[a];
+      tg_.cap[a * m + a] = kinv[a];
       for (std::size_t b = 0; b < m; ++b) {
         double v = 0.0;
         for (int i = 0; i < 4; ++i)
-          for (int d = 0; d < 3; ++d) v += wcols_[a].u[3 * i + d] * wcols_[b].zval(wcols_[a].node[i], d);
-        cap_[a * m + b] += v;
+          for (int d = 0; d < 3; ++d) v += tg_.cols[a].u[3 * i + d] * tg_.cols[b].zval(tg_.cols[a].node[i], d);
+        tg_.cap[a * m + b] += v;
       }
     }
-    cpiv_.resize(m);
-    return blocktri::lu_factor(static_cast<int>(m), cap_.data(), cpiv_.data());
+    tg_.cpiv.resize(m);
+    return blocktri::lu_factor(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data());
   }
 
   void apply_couplings() {
-    const std::size_t m = wcols_.size();
+    const std::size_t m = tg_.cols.size();
     if (m == 0) return;
     tw_.assign(m, 0.0);
     for (std::size_t a = 0; a < m; ++a)
       for (int i = 0; i < 4; ++i)
-        for (int d = 0; d < 3; ++d) tw_[a] += wcols_[a].u[3 * i + d] * rhs_[6 * wcols_[a].node[i] + d];
+        for (int d = 0; d < 3; ++d) tw_[a] += tg_.cols[a].u[3 * i + d] * rhs_[6 * tg_.cols[a].node[i] + d];
     ty_.resize(m);
-    blocktri::lu_solve(static_cast<int>(m), cap_.data(), cpiv_.data(), tw_.data(), ty_.data());
+    blocktri::lu_solve(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data(), tw_.data(), ty_.data());
     for (std::size_t b = 0; b < m; ++b) {
-      const WCol &w = wcols_[b];
+      const CouplingColumn &w = tg_.cols[b];
       std::size_t off = 0;
       for (int r = 0; r < w.nr; ++r) {
         const std::size_t len = 6 * static_cast<std::size_t>(w.hi[r] - w.lo[r]);
@@ -734,17 +884,18 @@ class Stepper {
     }
   }
 
-  std::vector<WCol> wcols_;
-  std::vector<double> cap_, tw_, ty_;
-  std::vector<int> cpiv_, flo_, fhi_;
+  std::vector<double> tw_, ty_;
+  std::vector<int> flo_, fhi_;
 
-  std::vector<Node> saved_;
+  std::vector<std::vector<Node>> starts_;  // state at the start of the (sub-)step of each halving level
   const std::vector<NodeForceModel *> *models_ = nullptr;
   ForceJacobian jac_;
   std::vector<Vec3> Fc_, dxs_;
   std::vector<Vec3> dQx_, dQw_, lastdx_, lastdth_;
-  std::vector<double> Dm_, Lm_, Um_, rhs_, scale_;
-  std::vector<int> piv_;
+  std::vector<double> rhs_;
+  std::vector<beam::NodeState> ns_;  // the nodes' states as the element sees them, at the current iterate
+  bool started_held_ = false;  // the current attempt started on a held tangent
+  Tangent tg_;  // the iteration matrix in use (exchanged with the caller's in step())
 };
 
 }  // namespace fiberform::physics::rod
