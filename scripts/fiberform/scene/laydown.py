@@ -121,6 +121,12 @@ class LaydownSection(_Section):
         "fix fiber/beam newton_max: Newton iterations per implicit step before it is split",
         "1", default=25, ge=1, le=1000,
     )  # fmt: skip
+    tangent_steps: int = quantity(
+        "fix fiber/beam tangent_steps: steps a fiber's factored Newton tangent may be reused (1: "
+        "a new one every step, so a resumed lay-down equals an uninterrupted one exactly; more: "
+        "faster, but a resumed run differs at the level of the Newton tolerance, as restart "
+        "files do not hold the tangents)", "1", default=1, ge=1, le=100000,
+    )  # fmt: skip
     damping_time_s: float = quantity(
         "fix fiber/beam Kelvin-Voigt damping time", "s", default=0.0, ge=0.0, le=1.0
     )

@@ -156,7 +156,7 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
                    "inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
                    "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
                    "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
-                   "newton_max", ld.newton_max_iterations, restart=restart,
+                   "newton_max", ld.newton_max_iterations, "tangent_steps", ld.tangent_steps, restart=restart,
                    flat_decomposition=True)
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
