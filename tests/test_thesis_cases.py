@@ -119,3 +119,11 @@ def test_case_a_generates_its_mass(case_a: Path, section: str) -> None:
         ratio = radii[:, 1] / radii[:, 0]
         assert np.all(ratio > 0.25 * (1 - j) / (1 + j) - 1e-12) and np.all(ratio < 0.25 * (1 + j) / (1 - j) + 1e-12)
     print(f"case A {section}: {count} fibers ({int(fine.sum())} fines), {mass.sum() * 1e9:.2f} ug")
+
+
+def test_bare_fabric_scene() -> None:
+    """scenes/thesis/bare-fabric.yaml: the case without fibers on the same 3 x 3 mm fabric."""
+    sc = load_scene(THESIS / "bare-fabric.yaml")
+    assert sc.fibers is None and sc.laydown is None and sc.permeability is not None
+    assert (sc.fabric.size_x_m, sc.fabric.size_y_m, sc.fabric.shed) == (3e-3, 3e-3, 8)
+    assert sc.permeability.pressure_drop_Pa == 125.0  # ASTM D737, the thesis' CFM
