@@ -50,3 +50,11 @@ def fiberform_cmd(venv_bin: Path) -> list[str]:
     if exe.is_file():
         return [str(exe)]
     return [sys.executable, "-m", "fiberform"]
+
+
+@pytest.fixture(scope="session")
+def fiberdem_build(build_dir: Path) -> Path:
+    """The build directory, once fiberdem is built there (the test is skipped otherwise)."""
+    if not (build_dir / "bin" / "fiberdem").is_file():
+        pytest.skip("fiberdem not built")
+    return build_dir

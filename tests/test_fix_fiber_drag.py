@@ -43,13 +43,6 @@ def slip_speed(d: float, area: float) -> float:
     return float(brentq(residual, 1e-9, 10.0, xtol=1e-14, rtol=1e-12))
 
 
-@pytest.fixture(scope="module")
-def fiberdem_build(build_dir: Path) -> Path:
-    if not (build_dir / "bin" / "fiberdem").is_file():
-        pytest.skip("fiberdem not built")
-    return build_dir
-
-
 @pytest.mark.parametrize("radius", [10e-6, 40e-6])
 def test_stiff_fiber_reaches_balance_velocity(fiberdem_build: Path, tmp_path: Path,
                                               radius: float) -> None:

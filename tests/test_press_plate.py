@@ -37,13 +37,6 @@ AREA, DT, RAMP, HOLD = 1e-6, 1e-6, 1e-4, 1.5e-3
 EVERY = 25
 
 
-@pytest.fixture(scope="module")
-def fiberdem_build(build_dir: Path) -> Path:
-    if not (build_dir / "bin" / "fiberdem").is_file():
-        pytest.skip("fiberdem not built")
-    return build_dir
-
-
 def _fiber() -> Fiber:
     x = np.zeros((N, 3))
     x[:, 0] = np.linspace(-L / 2, L / 2, N)

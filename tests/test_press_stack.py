@@ -167,13 +167,6 @@ def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict
 
 
 @pytest.fixture(scope="module")
-def fiberdem_build(build_dir: Path) -> Path:
-    if not (build_dir / "bin" / "fiberdem").is_file():
-        pytest.skip("fiberdem not built")
-    return build_dir
-
-
-@pytest.fixture(scope="module")
 def runs(fiberdem_build: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, np.ndarray]]:
     build_dir = fiberdem_build
     base = tmp_path_factory.mktemp("press_stack")

@@ -210,16 +210,15 @@ def fiber_com_speeds(columns: Mapping[str, Any]) -> tuple[Array, Array]:
     return msum, np.linalg.norm(v / msum[:, None], axis=1)
 
 
-def max_fiber_speed(columns: Mapping[str, Any], mass_fraction: float = 1.0) -> float:
-    """Centre-of-mass speeds of the fibers of a dump frame (m/s): the largest, or with
-    ``mass_fraction`` q < 1 the speed below which the fibers carrying q of the mass move (the
-    settle measure of fix fiber/yarns ``settle_mass_fraction``, physics/settle.h)."""
-    msum, speed = fiber_com_speeds(columns)
-    if mass_fraction >= 1.0:
+def mass_fraction_speed(mass: Array, speed: Array, fraction: float = 1.0) -> float:
+    """The speed below which the bodies carrying ``fraction`` of the mass move (m/s): the largest
+    speed at fraction 1. The lay-down's settle measure of fix fiber/yarns ``settle_mass_fraction``
+    (the C++ twin, physics/settle.h, decides the run; this one reports it)."""
+    if fraction >= 1.0:
         return float(np.max(speed))
     order = np.argsort(speed, kind="stable")
-    cum = np.cumsum(msum[order])
-    k = min(int(np.searchsorted(cum, mass_fraction * cum[-1])), len(order) - 1)
+    cum = np.cumsum(mass[order])
+    k = min(int(np.searchsorted(cum, fraction * cum[-1])), len(order) - 1)
     return float(speed[order[k]])
 
 

@@ -44,7 +44,7 @@ from ..errors import StageError
 from ..fiber_io import fiber_preamble
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
-    max_fiber_speed, pair_options, sheet_thickness, write_sheet_png, write_sheet_vtu, write_yarns,
+    mass_fraction_speed, pair_options, sheet_thickness, write_sheet_png, write_sheet_vtu, write_yarns,
     yarn_distances,
 )
 from ..inputs import (
@@ -434,11 +434,12 @@ class Laydown(Stage):
         max_speeds = np.array([
             float(np.max(np.linalg.norm(np.stack([fr.columns[c] for c in ("vx", "vy", "vz")], 1), axis=1)))
             if len(fr.ids) else 0.0 for fr in frames])
-        fiber_speeds = np.array([max_fiber_speed(fr.columns) if len(fr.ids) else 0.0
-                                 for fr in frames])
+        # (mass, centre-of-mass speed) of every fiber, per snapshot: the settle measures and the
+        # sheet's growth below
+        coms = [fiber_com_speeds(fr.columns) if len(fr.ids) else (np.zeros(1), np.zeros(1)) for fr in frames]
+        fiber_speeds = np.array([float(np.max(v)) for _, v in coms])
         q = ld.settle_mass_fraction
-        settle_speeds = (np.array([max_fiber_speed(fr.columns, q) if len(fr.ids) else 0.0 for fr in frames])
-                         if q < 1.0 else fiber_speeds)
+        settle_speeds = np.array([mass_fraction_speed(m, v, q) for m, v in coms]) if q < 1.0 else fiber_speeds
         measure = settle_speeds if ld.settle_measure == "fiber" else max_speeds
         r = h5.create_group("run")
         r.attrs.update({
@@ -479,13 +480,9 @@ class Laydown(Stage):
             write_dataset(snap, "settle_fiber_speed", settle_speeds, "m/s",
                           f"fiber centre-of-mass speed below which {q:g} of the mass moves, per snapshot")
 
-        def settled_mass(columns: Mapping[str, Any]) -> float:
-            m, v = fiber_com_speeds(columns)
-            return float(np.sum(m[v < v_settle]))
-
         # step 0: the fibers are placed at rest, not settled
-        growth = np.array([settled_mass(fr.columns) if len(fr.ids) and fr.step > 0 else 0.0
-                           for fr in frames])
+        growth = np.array([float(np.sum(m[v < v_settle])) if len(fr.ids) and fr.step > 0 else 0.0
+                           for fr, (m, v) in zip(frames, coms)])
         write_dataset(snap, "settled_grammage", growth / area, "kg/m^2",
                       "mass of the fibers whose centre-of-mass speed is below the settle speed, per "
                       "fabric area, per snapshot (the sheet's growth; 0 at step 0)")
