@@ -23,7 +23,7 @@ help:
 	@echo "make demo      - install, build, run the default scene ($(SCENE)) into runs/"
 	@echo "make test      - install, build, run all tests (ctest + pytest)"
 	@echo "make setup     - install missing Debian packages, OpenFOAM headers, build C++, Python venv"
-	@echo "make validate  - longer validation runs"
+	@echo "make validate  - longer validation runs and the reduced thesis campaign (bench/thesis/run.py --reduced)"
 	@echo "make bench     - benchmarks (write JSON + PNG under bench/*/results)"
 
 setup: packages openfoam-headers build venv
@@ -51,6 +51,7 @@ test: setup
 
 validate: setup
 	@bash scripts/setup/run-tests.sh $(BUILD) --validate
+	$(VENV)/bin/python bench/thesis/run.py --reduced
 
 bench: setup
 	@bash bench/run-all.sh $(BUILD)

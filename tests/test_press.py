@@ -174,6 +174,38 @@ def test_overlap_guard_stops_overpressing(sheet: Path, fiberform_cmd: list[str],
         assert not (out / name).exists(), name
 
 
+def test_overlap_action_stop_keeps_the_sheet_where_the_guard_trips(sheet: Path, fiberform_cmd: list[str],
+                                                                    build_dir: Path) -> None:
+    """The same over-pressing with ``overlap_action: stop`` (the thesis stopped pressing its
+    circular-section sheets early, sec. 4.2): the stage succeeds, the plate stopped well above its
+    1 um target, before the planned end of the motion, the pressed sheet is that of the last
+    snapshot, and the record says why."""
+    out = sheet / "runs" / NAME / "press"
+    shutil.rmtree(out, ignore_errors=True)
+    target, speed, dt = 1.0e-6, 1.0, 1.0e-7
+    proc = _press(sheet, fiberform_cmd, build_dir,
+                  f"{{mode: velocity, plate_speed_m_s: {speed}, target_thickness_m: {target}, "
+                  "overlap_limit: 0.05, hold_time_s: 1.0e-4, output_interval_s: 2.0e-6, "
+                  f"timestep_s: {dt}, overlap_action: stop}}", "guard_stop")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    top, fab = _sheet_top(sheet), _fabric_top(sheet)
+    with h5py.File(out / "press.h5", "r") as h:
+        a, c = h["run"].attrs, h["curve"]
+        assert a["stopped_by_guard"] == 1
+        gap = float(c["plate_z"][-1] - a["fabric_top_z_m"])
+        # the plate travelled from 5 um above the sheet top towards 1 um above the fabric top
+        planned = (top + 5e-6 - fab - target) / speed
+        assert float(c["time"][-1]) < planned - dt, (float(c["time"][-1]), planned)
+        assert target + 1e-6 < gap < top - fab, (gap, top - fab)
+        # the guard's measure (the fixes' overlaps) is not in the curve, but the dump's own
+        # overlaps at the stop exceed the lay-down's by about the limit somewhere
+        assert max(c["overlap_fiber"][-1], c["overlap_yarn"][-1], c["overlap_plate"][-1]) > 0.02
+        x = h["sheet/x"][...]
+    with h5py.File(sheet / "runs" / NAME / "laydown" / "laydown.h5", "r") as h:
+        assert x.shape == h["sheet/x"].shape
+    assert "stopped by the overlap guard" in (out / "report.md").read_text()
+
+
 @pytest.mark.parametrize("press, field", [
     ("{mode: velocity, plate_speed_m_s: -1.0, target_thickness_m: 1.0e-6}", "plate_speed_m_s"),
     ("{mode: velocity, target_thickness_m: 1.0e-3}", "target_thickness_m"),

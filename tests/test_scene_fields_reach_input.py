@@ -170,6 +170,7 @@ PRESS_ALTERNATIVES: dict[str, tuple[str, object]] = {
     "release_time_s": ("pressure", 3.0e-3),
     "servo_band_Pa": ("pressure", 5.0),
     "overlap_limit": ("pressure", 0.3),
+    "overlap_action": ("velocity", "stop"),
     "ranks": ("pressure", 2),
 }
 
@@ -213,5 +214,10 @@ def test_press_field_changes_the_input(field: str) -> None:
             return program.ranks
 
         assert ranks(False) != ranks(True) == PRESS_ALTERNATIVES["ranks"][1]
+        return
+    if field == "overlap_action":
+        # configures the stage's reading of a run the guard ended, not the input (the guard ends
+        # the run either way): test_press.py::test_overlap_action_stop_keeps_the_sheet_where_the_guard_trips
+        assert _press_input(base) == _press_input(base, field)
         return
     assert _press_input(base) != _press_input(base, field), f"press.{field} does not reach the input"

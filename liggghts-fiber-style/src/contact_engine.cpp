@@ -175,6 +175,30 @@ double segment_distance(Vec3 a, Vec3 b, Vec3 p) {
 }
 }  // namespace
 
+ContactEngine::RangeBounds ContactEngine::range_bounds(const NodeData &nd) const {
+  RangeBounds rb;
+  const int nall = atom->nlocal + atom->nghost;
+  for (int i = 0; i < nall; ++i) {
+    rb.vmax = std::max(rb.vmax, vlen(nd.v[i]));
+    if (nd.acc) rb.amax = std::max(rb.amax, vlen(nd.acc[i]));
+    rb.rmax = std::max(rb.rmax, atom->radius[i]);
+  }
+  return rb;
+}
+
+bool ContactEngine::element_out_of_reach(const Element &A, const Element &B, const RangeBounds &rb,
+                                         double dt) const {
+  double s = 0.0, t = 0.0;
+  physics::closest_params_segment_segment(A.xa, A.xb, B.xa, B.xb, s, t);
+  const double seg = norm(lerp(B.xa, B.xb, t) - lerp(A.xa, A.xb, s));
+  // circles: a point pair's surface gap is at least the centre-line distance minus both radii;
+  // rectangles: minus the two half-diagonals (rect_surface_distance <= half the diagonal each)
+  const double rr = cfg.section == Section::Circle ? A.radius + rb.rmax : std::hypot(cfg.width, cfg.thickness);
+  const double allow = (A.vmax + rb.vmax) * dt + 0.5 * (A.amax + rb.amax) * dt * dt;
+  const double reach = cfg.law.h_cut + rr + allow;
+  return seg > reach * (1.0 + 1e-9) + 1e-15;  // margin: rounding cannot flip the exact argument
+}
+
 bool ContactEngine::mutual_closest(const Element &A, int k, const Element &B, int q, double dist) const {
   const Vec3 p = lerp(B.xa, B.xb, physics::point_fraction(q, B.n));
   const std::uint64_t idk = point_id(A.tag, k);
@@ -271,6 +295,8 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
   };
   physics::PairLaw law;
   Element A, B;
+  // Bounds over every node (local and ghost) for the exact element-level filter below.
+  const RangeBounds rb = range_bounds(nd);
   for (int ii = 0; ii < list->inum; ++ii) {
     const int i = list->ilist[ii];
     if (!make_element(i, nd, A)) continue;
@@ -291,6 +317,12 @@ void ContactEngine::pairs(NeighList *list, double dt, bool subintegrate, const N
       // cheap bound: distance between midpoints minus half lengths
       const Vec3 mA = 0.5 * (A.xa + A.xb), mB = 0.5 * (B.xa + B.xb);
       if (norm(mB - mA) - 0.5 * (A.len + B.len) - rr - allow > L.h_cut) continue;
+      // exact segment distance against bounds valid for ANY element of B's fiber (largest radius,
+      // speed and acceleration of all nodes): if B's closest point to one of A's points were the
+      // selected candidate of that point and fiber, the next one (farther) fails the point-level
+      // test below as well, so dropping B changes nothing but the work (about 80 % of the step in
+      // a loose suspension before this filter).
+      if (element_out_of_reach(A, B, rb, dt)) continue;
       const int eidx = static_cast<int>(partners_.size());
       partners_.push_back(B);
       for (int k = 0; k < A.n; ++k) {

@@ -121,6 +121,14 @@ class ContactEngine : protected LAMMPS_NS::Pointers {
     double vmax, amax;    // node speed / acceleration bounds (for the range test)
   };
   bool make_element(int i, const NodeData &nd, Element &e) const;
+  // Largest node speed, acceleration and radius over local and ghost nodes (pairs()).
+  struct RangeBounds {
+    double vmax = 0.0, amax = 0.0, rmax = 0.0;
+  };
+  RangeBounds range_bounds(const NodeData &nd) const;
+  // True when no contact point of B can come within h_cut of one of A's over the step, for any
+  // element of B's fiber in B's place (see pairs()).
+  bool element_out_of_reach(const Element &A, const Element &B, const RangeBounds &rb, double dt) const;
   // Is point k of element A the closest point of A's fiber to point q of element B (order: distance,
   // then point id)? Walks A's chain from A in both directions.
   bool mutual_closest(const Element &A, int k, const Element &B, int q, double dist) const;

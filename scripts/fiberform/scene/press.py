@@ -71,6 +71,13 @@ class PressSection(_Section):
         "(beyond the overlaps the lay-down left)", "1",
         default=0.2, gt=0.0, le=1.0,
     )  # fmt: skip
+    overlap_action: Literal["fail", "stop"] = choice(
+        "What the overlap guard does when it trips: fail (the stage ends with exit status 1) or "
+        "stop (the press ends there and the sheet of that moment is the pressed sheet, its plate "
+        "thickness recorded as the thickness reached; thesis sec. 4.2: circular-section sheets "
+        "could not be pressed to the experimental thickness, so their pressing was stopped earlier)",
+        default="fail",
+    )
     ranks: int = quantity(
         "MPI ranks of the press (> 1 needs laydown.yarn_contact newton)", "1", default=1, ge=1,
         le=100000,

@@ -269,7 +269,8 @@ class Press(Stage):
             c, a = h5["curve"], h5["run"].attrs
             return {"press_plate_gap_m": float(c["plate_z"][-1] - a["fabric_top_z_m"]),
                     "press_max_pressure_Pa": float(np.nanmax(c["pressure"][...])),
-                    "pressed_span_thickness_m": float(c["thickness_span"][-1])}
+                    "pressed_span_thickness_m": float(c["thickness_span"][-1]),
+                    "press_stopped_by_guard": float(a.get("stopped_by_guard", 0))}
 
     def results(self, ctx: StageContext) -> list[str]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
@@ -279,6 +280,8 @@ class Press(Stage):
             line = (f"press ({a['mode']}): plate at {(c['plate_z'][-1] - a['fabric_top_z_m']) * 1e6:.1f} um "
                     f"above the fabric top, largest pressure {np.nanmax(p):.3g} Pa; span thickness "
                     f"{span[0] * 1e6:.1f} -> {span[-1] * 1e6:.1f} um")
+            if a.get("stopped_by_guard", 0):
+                line += "; stopped by the overlap guard before its target"
             if "hold_pressure_mean_Pa" in a:
                 line += (f"; hold {a['hold_pressure_mean_Pa']:.4g} Pa (largest deviation "
                          f"{a['hold_pressure_max_dev'] * 100:.2f} %)")
@@ -356,18 +359,23 @@ class Press(Stage):
                      "a yarn": -last.get("h_yarn", 1.0) - p.start_overlap_yarn,
                      "the plate": -last.get("h_plate", 1.0)}
             worst = max(added.items(), key=lambda kv: kv[1])
-            raise StageError(
-                f"press: overlap guard: at step {int(last.get('step', -1))} the press has pushed an "
-                f"element {worst[1] * 1e6:.3g} um = {worst[1] / p.t_min:.2f} x the thinner fiber's "
-                f"thickness ({p.t_min * 1e6:.3g} um) into {worst[0]} (beyond the lay-down's own "
-                f"overlap), above press.overlap_limit {pr.overlap_limit:g}: the contact law cannot "
-                f"carry this load (lower target_pressure_Pa or plate_speed_m_s, raise "
-                f"target_thickness_m, or a smaller timestep_s; docs/stages/press.md, limits); "
-                f"snapshots up to there: {work / TRAJ_NAME}")
-        self._collect(ctx, h5, tmp, p, work, yarns, wall)
+            what = (f"at step {int(last.get('step', -1))} the press has pushed an element "
+                    f"{worst[1] * 1e6:.3g} um = {worst[1] / p.t_min:.2f} x the thinner fiber's "
+                    f"thickness ({p.t_min * 1e6:.3g} um) into {worst[0]} (beyond the lay-down's own "
+                    f"overlap), above press.overlap_limit {pr.overlap_limit:g}")
+            if pr.overlap_action == "fail":
+                raise StageError(
+                    f"press: overlap guard: {what}: the contact law cannot carry this load (lower "
+                    f"target_pressure_Pa or plate_speed_m_s, raise target_thickness_m, or a smaller "
+                    f"timestep_s, or overlap_action stop; docs/stages/press.md, limits); snapshots "
+                    f"up to there: {work / TRAJ_NAME}")
+            guard_stop = f"stopped by the overlap guard (overlap_action stop): {what}"
+        else:
+            guard_stop = ""
+        self._collect(ctx, h5, tmp, p, work, yarns, wall, guard_stop)
 
     def _collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], p: PressPlan,
-                 work: Path, yarns: Yarns, wall: float) -> None:
+                 work: Path, yarns: Yarns, wall: float, guard_stop: str = "") -> None:
         scene = ctx.scene
         pr, dom, f = scene.press, scene.domain, scene.fibers
         assert pr is not None and dom is not None and f is not None
@@ -481,6 +489,7 @@ class Press(Stage):
         rg.attrs["overlap_limit"] = pr.overlap_limit
         rg.attrs["fiberdem_wall_s"] = wall
         rg.attrs["ranks"] = pr.ranks
+        rg.attrs["stopped_by_guard"] = int(bool(guard_stop))
         final = work / RESTART_NAME
         if not final.is_file():
             raise StageError(f"{final}: fiberdem wrote no final restart file (see work/{LOG_NAME})")
@@ -505,6 +514,8 @@ class Press(Stage):
             f"fabric top {p.fabric_top * 1e3:.4f} mm",
             f"- {int(steps[-1])} steps of {p.dt:g} s = {t[-1] * 1e3:.3f} ms simulated; fiberdem "
             f"wall time {wall:.1f} s on {pr.ranks} rank(s)",
+            *([f"- **{guard_stop}**; the plate was {(plate_z[-1] - p.fabric_top) * 1e6:.2f} um above "
+               "the fabric top there: the pressed sheet is that of this moment"] if guard_stop else []),
             *[f"- {line}" for line in summary["lines"]],
             f"- overlap guard: {pr.overlap_limit:g} x the thinner fiber's thickness "
             f"({p.t_min * 1e6:.3g} um) added by the press to the lay-down's own overlaps "

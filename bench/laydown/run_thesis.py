@@ -1,0 +1,171 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Thesis-scale lay-down benchmark (issue 10): the shipped thesis case scenes laid down with the
+thesis' physics and with speed options, on 1 or 2 MPI ranks.
+
+Each run is ``fiberform run SCENE --to laydown`` of a case scene (scenes/thesis/case-X-Y.yaml)
+with the variant's fields set, in its own folder ``runs/bench-laydown/<case>-<variant>-r<ranks>-s<seed>/``
+(kept: a second call resumes or skips finished stages; the generate, fabric and flow stages are
+taken over from an earlier run of the same case and seed when their inputs are identical). The
+numbers come from laydown.h5, the fiberdem log and the process accounting:
+
+* simulated time, settled or not, wall time of the lay-down program, node-steps per second;
+* the sheet: thickness, grammage, smallest fiber-fiber gap and element-yarn clearance (the
+  lay-down's own checks of every snapshot);
+* the largest resident memory of one process (getrusage of the children).
+
+Variants (``--variants``):
+  thesis   the scene as shipped: fiber-fiber contact averaged + CVODE, vdw + es + steric (thesis sec. 2.4)
+  newton   fiber-fiber contact inside each fiber's Newton solve (laydown.fiber_contact newton), same terms
+  steric   newton, steric term only (a speed option: no colloidal terms)
+
+    .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --variants thesis newton --ranks 2
+    .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --max-time 2e-3   # a short probe
+
+Writes bench/laydown/results/thesis_laydown.json (rows appended per run; see docs/bench/laydown.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import yaml
+
+from fiberform.provenance import atomic_write_text, machine_info
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+THESIS = ROOT / "scenes" / "thesis"
+VARIANTS: dict[str, dict[str, Any]] = {
+    "thesis": {},
+    "newton": {"laydown.fiber_contact": "newton"},
+    "steric": {"laydown.fiber_contact": "newton", "laydown.terms": ["steric"], "contact.terms": ["steric"]},
+}
+SHARED_STAGES = ("fibers", "fabric", "flow")
+THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given  # stage folders a variant can take over
+
+
+def _set(data: dict[str, Any], path: str, value: Any) -> None:
+    node = data
+    keys = path.split(".")
+    for k in keys[:-1]:
+        node = node.setdefault(k, {})
+    node[keys[-1]] = value
+
+
+def scene_for(case: str, variant: str, ranks: int, seed: int, max_time: float | None, runs: Path) -> tuple[str, dict[str, Any]]:
+    data = yaml.safe_load((THESIS / f"case-{case}.yaml").read_text())
+    for path, value in VARIANTS[variant].items():
+        _set(data, path, value)
+    if data["laydown"].get("fiber_contact") == "newton":
+        data["contact"].pop("integrator", None)  # the sub-integrator belongs to the averaged contact
+    name = f"{case}-{variant}-r{ranks}-s{seed}"
+    data.update(name=f"bench_{name.replace('-', '_')}", seed=seed, output_dir=str(runs / name))
+    data["laydown"]["ranks"] = ranks
+    if max_time is not None:
+        data["laydown"]["max_time_s"] = max_time
+    elif variant == "thesis":
+        # the averaged contact lets the fibers of a thesis case pass through each other and its
+        # cost grows with the overlaps (docs/models/contact.md section 6): a probe of THESIS_PROBE_S
+        data["laydown"]["max_time_s"] = THESIS_PROBE_S
+    return name, data
+
+
+def donor_stages(runs: Path, case: str, seed: int, target: Path) -> None:
+    """Copy generate/fabric/flow folders of an earlier run of the same case and seed (the stages
+    check their input hashes and run again if anything differs)."""
+    for other in sorted(runs.glob(f"{case}-*-s{seed}")):
+        if other == target:
+            continue
+        for stage in SHARED_STAGES:
+            src, dst = other / stage, target / stage
+            if src.is_dir() and not dst.exists() and any(src.glob("*.h5")):
+                shutil.copytree(src, dst)
+
+
+def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | None, runs: Path,
+            build: Path) -> dict[str, Any]:
+    name, data = scene_for(case, variant, ranks, seed, max_time, runs)
+    out = ROOT / runs / name
+    out.mkdir(parents=True, exist_ok=True)
+    scene = out / "scene.yaml"
+    atomic_write_text(scene, yaml.safe_dump(data, sort_keys=False))
+    donor_stages(ROOT / runs, case, seed, out)
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "fiberform", "run", str(scene), "--to", "laydown",
+                           "--build-dir", str(build)], cwd=ROOT, capture_output=True, text=True)
+    total = time.monotonic() - t0
+    rss_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    row: dict[str, Any] = {"case": case, "variant": variant, "ranks": ranks, "seed": seed,
+                           "pipeline_wall_s": total, "max_rss_MiB_any_child_so_far": rss_kb / 1024.0,
+                           "exit": proc.returncode}
+    h5 = out / "laydown" / "laydown.h5"
+    if proc.returncode != 0 or not h5.is_file():
+        row["error"] = (proc.stdout[-800:] + proc.stderr[-800:]).strip()
+        return row
+    with h5py.File(h5, "r") as h:
+        a = dict(h["run"].attrs)
+        nodes = int(h["sheet/x"].shape[0])
+        ff = h["snapshots/min_fiber_fiber_gap"][...]
+    steps, wall = int(a["steps"]), float(a["wall_time_s"])
+    row.update({
+        "nodes": nodes, "steps": steps, "settled": bool(a["settled"]),
+        "simulated_ms": float(a["simulated_time_s"]) * 1e3, "laydown_wall_s": wall,
+        "wall_s_per_simulated_ms": wall / max(float(a["simulated_time_s"]) * 1e3, 1e-12),
+        "node_steps_per_s": nodes * steps / wall if wall > 0 else float("nan"),
+        "sheet_thickness_m": float(a["sheet_thickness_m"]), "grammage_kg_m2": float(a["grammage_kg_m2"]),
+        "min_fiber_fiber_gap_m": float(np.min(ff)) if ff.size else float("nan"),
+        "final_fiber_fiber_gap_m": float(ff[-1]) if ff.size else float("nan"),
+        "min_element_yarn_clearance_m": float(a["min_element_clearance_m"]),
+        "fiber_contact": str(a.get("fiber_contact", "")),
+    })
+    return row
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", nargs="+", default=["A-circular"], help="case scenes, e.g. A-circular C-rectangular")
+    ap.add_argument("--variants", nargs="+", default=["thesis", "newton"], choices=sorted(VARIANTS))
+    ap.add_argument("--ranks", type=int, nargs="+", default=[2])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1])
+    ap.add_argument("--max-time", type=float, help="laydown.max_time_s (s) of every run (default: the scene's; "
+                    f"the thesis variant {THESIS_PROBE_S:g} s)")
+    ap.add_argument("--runs", type=Path, default=Path("runs") / "bench-laydown")
+    ap.add_argument("--out", type=Path, default=HERE / "results" / "thesis_laydown.json")
+    args = ap.parse_args()
+    for case in args.cases:
+        if not (THESIS / f"case-{case}.yaml").is_file():
+            print(f"--cases: no scene scenes/thesis/case-{case}.yaml", file=sys.stderr)
+            return 2
+    build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
+    old: list[dict[str, Any]] = []
+    if args.out.is_file():
+        old = json.loads(args.out.read_text()).get("rows", [])
+    rows = []
+    for case in args.cases:
+        for seed in args.seeds:
+            for variant in args.variants:
+                for ranks in args.ranks:
+                    row = run_one(case, variant, ranks, seed, args.max_time, args.runs, build)
+                    row["machine"] = machine_info()
+                    rows.append(row)
+                    print(json.dumps({k: v for k, v in row.items() if k != "machine"}), flush=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(args.out, json.dumps({"rows": old + rows}, indent=2) + "\n")
+    print(f"wrote {args.out}")
+    return 0 if all(r.get("exit") == 0 for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The validation campaign of issue 15: thesis Table 4.1 reproduced end to end.
+
+For every point (thesis cases A-F, G, and the seven experimental sheets' masses; see
+scenes/thesis/campaign.yaml) and cross-section, a scene is derived from the shipped case scenes
+(fiberform.campaign.point_scene) into ``runs/thesis-campaign/scenes/`` and run through
+``fiberform sweep SCENE --seeds N`` (generate, fabric, flow, lay-down, permeability, press to the
+experimental thickness, permeability of the pressed sheet). Finished stages are skipped, so the
+same command resumes the campaign. ``--submit slurm|pbs`` submits each sweep as job arrays
+instead (then run again without --submit, or with --collect-only, once they are done).
+
+    .venv/bin/python bench/thesis/run.py --reduced            # make validate: A and C, seed 1
+    .venv/bin/python bench/thesis/run.py                      # the full campaign (cluster scale)
+    .venv/bin/python bench/thesis/run.py --points A --sections circular --seeds 1
+    .venv/bin/python bench/thesis/run.py --collect-only       # tables from what has finished
+
+Writes bench/thesis/results/campaign[-reduced].json: the machine, per variant (point, section,
+seed) the collected metrics and stage wall times with the ranks each stage ran on, per point the
+mean and sd over seeds, and per experimental sheet simulated / measured permeability in both mass
+conventions (docs/validation/table41.md). A variant that failed is listed with its error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from fiberform import campaign as cp
+from fiberform.provenance import atomic_write_text, machine_info
+from fiberform.scene import load_scene
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+THESIS = ROOT / "scenes" / "thesis"
+
+
+def _csv_list(text: str) -> list[str]:
+    return [t for t in (s.strip() for s in text.split(",")) if t]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--campaign", type=Path, default=THESIS / "campaign.yaml",
+                    help="campaign definition; its folder holds the base scenes and experiments.csv")
+    ap.add_argument("--runs", type=Path, default=Path("runs") / "thesis-campaign",
+                    help="output folder of the runs, relative to the current directory "
+                    "(default runs/thesis-campaign)")
+    ap.add_argument("--reduced", action="store_true", help="the campaign's reduced set (make validate)")
+    ap.add_argument("--points", type=_csv_list, help="comma list of points (A..G, S1..S7); default all")
+    ap.add_argument("--sections", type=_csv_list, help="comma list: circular, rectangular; default both")
+    ap.add_argument("--seeds", type=int, help="seeds per point (default: the campaign's)")
+    ap.add_argument("--submit", choices=("slurm", "pbs"), help="submit job arrays instead of running here")
+    ap.add_argument("--collect-only", action="store_true", help="run nothing; tabulate what has finished")
+    ap.add_argument("--out", type=Path, help="results JSON (default bench/thesis/results/campaign[-reduced].json)")
+    args = ap.parse_args()
+
+    c = cp.load_campaign(args.campaign)
+    thesis = args.campaign.resolve().parent
+    sheets = cp.read_experiments(thesis / "experiments.csv")
+    pts = cp.points(c, sheets)
+    names = args.points or (c.reduced.points if args.reduced else [p.name for p in pts])
+    unknown = sorted(set(names) - {p.name for p in pts})
+    if unknown:
+        print(f"--points: unknown point(s) {', '.join(unknown)} (known: {', '.join(p.name for p in pts)})",
+              file=sys.stderr)
+        return 2
+    sections = args.sections or list(c.sections)
+    if bad := sorted(set(sections) - {"circular", "rectangular"}):
+        print(f"--sections: {', '.join(bad)}: allowed circular, rectangular", file=sys.stderr)
+        return 2
+    seeds = args.seeds or (c.reduced.seeds if args.reduced else c.seeds)
+    if not 1 <= seeds <= 100:
+        print(f"--seeds {seeds}: allowed 1..100", file=sys.stderr)
+        return 2
+    fiberform = [sys.executable, "-m", "fiberform"]
+    build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
+    if args.runs.is_absolute():
+        print("--runs: give a folder relative to the current directory", file=sys.stderr)
+        return 2
+    scenes_dir = args.runs / "scenes"
+    scenes_dir.mkdir(parents=True, exist_ok=True)
+
+    chosen = [p for p in pts if p.name in names]
+    groups: dict[str, Path] = {}  # "A-circular" -> sweep dir
+    failures: dict[str, str] = {}
+    t_start = time.monotonic()
+    for p in chosen:
+        for section in sections:
+            group = f"{p.name}-{section}"
+            data = cp.point_scene(c, p, section, thesis, args.runs)  # type: ignore[arg-type]
+            scene_path = scenes_dir / f"{group}.yaml"
+            header = (f"# campaign point {p.name} ({p.mass_kg * 1e9:.2f} ug, experimental mass "
+                      f"{p.experimental_mass_kg * 1e9:.2f} ug, press target {p.press_target_m * 1e6:.1f} um), "
+                      f"{section}: derived by bench/thesis/run.py from {c.base[section]}\n")  # type: ignore[index]
+            text = header + yaml.safe_dump(data, sort_keys=False)
+            if not scene_path.is_file() or scene_path.read_text() != text:
+                atomic_write_text(scene_path, text)
+            sweep_dir = Path(f"{load_scene(scene_path).output_dir}-sweep")
+            groups[group] = sweep_dir
+            if args.collect_only:
+                continue
+            cmd = [*fiberform, "sweep", str(scene_path), "--seeds", str(seeds), "--build-dir", str(build)]
+            if args.submit:
+                cmd += ["--submit", args.submit]
+            print(f"== {group}: fiberform {' '.join(cmd[3:])}", flush=True)
+            t0 = time.monotonic()
+            proc = subprocess.run(cmd)
+            print(f"== {group}: exit {proc.returncode} after {time.monotonic() - t0:.0f} s", flush=True)
+            if proc.returncode != 0:
+                failures[group] = f"fiberform sweep exit {proc.returncode} (see its output above)"
+
+    collected: dict[str, list[dict[str, str]]] = {}
+    variants: list[dict[str, Any]] = []
+    for group, sweep_dir in groups.items():
+        if not (sweep_dir / "sweep.json").is_file():
+            continue
+        col = subprocess.run([*fiberform, "collect", str(sweep_dir), "--build-dir", str(build)],
+                             capture_output=True, text=True)
+        if col.returncode != 0:
+            print(f"== {group}: fiberform collect failed: {col.stderr.strip()[-500:]}", file=sys.stderr)
+        table = sweep_dir / "collect.csv"
+        rows = list(csv.DictReader(table.read_text().splitlines())) if table.is_file() else []
+        collected[group] = rows
+        point, section = group.split("-", 1)
+        scene = load_scene(next(iter(sorted((sweep_dir / "scenes").glob("*.yaml")))))
+        ranks = {"laydown": scene.laydown.ranks if scene.laydown else 1,
+                 "press": scene.press.ranks if scene.press else 1}
+        for r in rows:
+            variants.append({"point": point, "section": section, "ranks": ranks, **r})
+    summary = cp.summarise(collected)
+    ratios = {s: cp.sheet_ratios(c, sheets, pts, summary, s) for s in sections}  # type: ignore[arg-type]
+    ratios_pressed = {s: cp.sheet_ratios(c, sheets, pts, summary, s, "permeability_press_cfm")
+                      for s in sections}  # type: ignore[arg-type]
+    out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
+    cp.write_json(out, {
+        "campaign": str(args.campaign),
+        "command": " ".join(sys.argv[1:]), "machine": machine_info(), "seeds": seeds,
+        "points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
+                    "press_target_m": p.press_target_m} for p in chosen],
+        "wall_s": time.monotonic() - t_start, "failures": failures, "variants": variants,
+        "summary": summary, "sheets_unpressed": ratios, "sheets_pressed": ratios_pressed})
+    print(f"wrote {out}")
+    for group, stats in summary.items():
+        line = ", ".join(f"{k} {v['mean']:.4g}" + (f" +- {v['sd']:.2g}" if v["n"] > 1 else "")
+                         for k, v in stats.items())
+        print(f"{group}: {line}")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

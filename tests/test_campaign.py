@@ -1,0 +1,205 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""scenes/thesis/campaign.yaml and fiberform.campaign (issue 15): the validation campaign's points,
+their scenes and the per-sheet ratios, against the thesis' numbers and hand values.
+
+- a point of a case's mass gives exactly the shipped case scene (apart from name, output folder
+  and the campaign's press section): the derivation scales as the twelve case scenes do;
+- the SEM mapping is the thesis' (case B = sheet 2, linear) and G is sheet 7's counterpart;
+- press targets: a sheet's own measured thickness, a case's the thickness at its mapped mass;
+- every point scene of both sections is valid and presses with the overlap guard's stop;
+- statistics over seeds and ratios from hand-made collect rows.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fiberform import campaign as cp
+from fiberform.scene import parse_scene, read_scene_yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+THESIS = ROOT / "scenes" / "thesis"
+RUNNER = ROOT / "bench" / "thesis" / "run.py"
+
+
+@pytest.fixture(scope="module")
+def setup() -> tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]:
+    c = cp.load_campaign(THESIS / "campaign.yaml")
+    sheets = cp.read_experiments(THESIS / "experiments.csv")
+    return c, sheets, cp.points(c, sheets)
+
+
+def test_points_cover_cases_and_sheets(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    c, sheets, pts = setup
+    names = [p.name for p in pts]
+    assert names == ["A", "B", "C", "D", "E", "F", "G", "S1", "S2", "S3", "S4", "S5", "S6", "S7"]
+    # thesis Table 4.2: k x 35.7 ug
+    for name, k in zip("ABCDEF", (1.0, 2.5, 5.0, 7.5, 10.0, 12.5), strict=True):
+        assert next(p for p in pts if p.name == name).mass_kg == pytest.approx(k * 35.7e-9, rel=1e-12)
+    # thesis Table 4.1: scaled masses used directly
+    for s, ug in zip(range(1, 8), (13.5, 27.1, 45.1, 62.9, 90.0, 134.7, 179.4), strict=True):
+        p = next(p for p in pts if p.name == f"S{s}")
+        assert p.mass_kg == p.experimental_mass_kg == pytest.approx(ug * 1e-9, rel=1e-12)
+    assert c.reduced.points == ["A", "C"] and c.reduced.seeds == 1 and c.seeds == 3
+
+
+def test_sem_mapping_is_the_thesis(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    c, sheets, pts = setup
+    by = {p.name: p for p in pts}
+    f = 27.1 / (2.5 * 35.7)  # thesis sec. 5.1: case B (2.5 M_A) = sheet 2 (27.1 ug), linear
+    assert cp.sem_factor(c, sheets) == pytest.approx(f, rel=1e-12)
+    assert by["B"].experimental_mass_kg == pytest.approx(27.1e-9, rel=1e-12)
+    assert by["B"].press_target_m == pytest.approx(10e-6)  # sheet 2's thickness
+    assert by["G"].experimental_mass_kg == pytest.approx(179.4e-9, rel=1e-3)  # sheet 7
+    assert by["G"].press_target_m == pytest.approx(149e-6, rel=1e-3)
+    # case C maps between sheets 3 (45.1 ug, 82 um) and 4 (62.9 ug, 93 um), as the thesis says
+    m = 5.0 * 35.7e-9 * f
+    assert 45.1e-9 < m < 62.9e-9
+    assert by["C"].press_target_m == pytest.approx(82e-6 + (m - 45.1e-9) / (17.8e-9) * 11e-6, rel=1e-9)
+    # sheets press to their own thickness; sheet 1 (0 um) to the campaign's minimum
+    assert by["S4"].press_target_m == pytest.approx(93e-6)
+    assert by["S1"].press_target_m == c.press.min_target_m
+
+
+@pytest.mark.parametrize("case, k", [("A", 1.0), ("C", 5.0), ("F", 12.5)])
+@pytest.mark.parametrize("section", ["circular", "rectangular"])
+def test_case_point_is_the_shipped_case_scene(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]],
+                                              case: str, k: float, section: str) -> None:
+    c, _, pts = setup
+    p = next(p for p in pts if p.name == case)
+    data = cp.point_scene(c, p, section, THESIS, Path("runs/x"))  # type: ignore[arg-type]
+    shipped = read_scene_yaml((THESIS / f"case-{case}-{section}.yaml").read_text())
+    press = data.pop("press")
+    for d in (data, shipped):
+        d.pop("name"), d.pop("output_dir")
+    assert data == shipped
+    assert press["mode"] == "velocity" and press["overlap_action"] == "stop"
+    assert press["target_thickness_m"] == pytest.approx(p.press_target_m, rel=1e-6)
+
+
+def test_every_point_scene_is_valid(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    c, _, pts = setup
+    for p in pts:
+        for section in c.sections:
+            data = cp.point_scene(c, p, section, THESIS, Path("runs/x"))
+            sc = parse_scene(data, p.name)
+            assert sc.press is not None and sc.press.overlap_action == "stop"
+            assert sc.fibers.target_mass_kg == pytest.approx(p.mass_kg, rel=1e-6)
+            slab = sc.fiber_generation.placement_hi_m[2] - sc.fiber_generation.placement_lo_m[2]
+            # placement heights are written with 7 significant digits (1e-9 m at 3 mm)
+            assert slab == pytest.approx(c.slab_per_M_A_m[section] * p.mass_kg / c.M_A_kg, abs=1e-9)
+
+
+def test_summary_and_ratios_from_hand_rows(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    c, sheets, pts = setup
+    collected = {
+        "S2-circular": [{"permeability_cfm": "240.0"}, {"permeability_cfm": "260.0"}, {"permeability_cfm": ""}],
+        "A-circular": [{"permeability_cfm": "300.0"}],
+        "C-circular": [{"permeability_cfm": "200.0"}],
+    }
+    s = cp.summarise(collected)
+    assert s["S2-circular"]["permeability_cfm"] == {"mean": 250.0, "sd": statistics.stdev([240.0, 260.0]), "n": 2.0}
+    assert s["A-circular"]["permeability_cfm"]["sd"] == 0.0
+    rows = {r["sheet"]: r for r in cp.sheet_ratios(c, sheets, pts, s, "circular")}
+    assert rows[2]["direct"]["ratio"] == pytest.approx(250.0 / 255.0)
+    assert rows[1]["direct"] is None
+    # SEM: A maps to 10.84 ug, C to 54.2 ug: sheets 2 (27.1) and 3 (45.1) lie between, linearly
+    f = 27.1 / (2.5 * 35.7)
+    ma, mc = 35.7 * f, 5 * 35.7 * f
+    for sheet, m in ((2, 27.1), (3, 45.1)):
+        want = 300.0 + (m - ma) / (mc - ma) * (200.0 - 300.0)
+        assert rows[sheet]["sem"]["mean"] == pytest.approx(want, rel=1e-9)
+    assert rows[1]["sem"] is not None  # 13.5 ug lies between A and C too
+    assert rows[4]["sem"] is None and rows[7]["sem"] is None  # beyond case C
+
+
+def test_campaign_file_errors_name_the_field(tmp_path: Path) -> None:
+    text = (THESIS / "campaign.yaml").read_text().replace("seeds: 3 ", "seeds: 0 ")
+    bad = tmp_path / "campaign.yaml"
+    bad.write_text(text)
+    with pytest.raises(cp.ConfigError, match="seeds"):
+        cp.load_campaign(bad)
+
+
+# ---- the runner end to end on a tiny campaign (1 x 1 mm, a few fibers): every stage through the
+# sweep machinery, the results JSON, and the resume (a second call runs nothing again)
+TINY_BASE = """\
+format_version: 1
+name: tiny_campaign_base
+seed: 3
+output_dir: runs/unused
+fluid: {density_kg_m3: 998.2, viscosity_Pa_s: 1.0e-3}
+fibers: {target_mass_kg: 2.2e-9, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
+         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}
+fiber_generation: {placement_lo_m: [0.0, 0.0, 2.66e-3], placement_hi_m: [1.0e-3, 1.0e-3, 2.76e-3]}
+fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}
+flow: {delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.6e-3}
+laydown: {max_time_s: 0.006, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
+          timestep_s: 1.0e-6, friction_coefficient: 0.5}
+contact: {model: fiber_dlvo, terms: [steric]}
+permeability: {mode: subgrid, subgrid_cell_size_m: 100.0e-6, convergence_tolerance: 2.0e-2}
+"""
+TINY_CAMPAIGN = """\
+format_version: 1
+base: {circular: base.yaml, rectangular: base.yaml}
+sections: [circular]
+M_A_kg: 2.2e-9
+seeds: 2
+slab_per_M_A_m: {circular: 0.1e-3, rectangular: 0.1e-3}
+flow_margin_m: 0.7e-3
+cases: {A: 1.0, B: 2.0}
+sheets: [2]
+sem_mapping: {case: B, sheet: 2}
+press: {plate_speed_m_s: 0.02, min_target_m: 2.0e-6, hold_time_s: 2.0e-4, output_interval_s: 1.0e-4,
+        overlap_limit: 0.2}
+reduced: {points: [A], seeds: 1}
+"""
+TINY_EXPERIMENTS = """\
+# two made-up sheets for the runner test (not the thesis' values)
+sheet,injection_mass_g,permeability_cfm,thickness_um,scaled_injection_mass_ug
+1,1.0,500,0,0.5
+2,2.0,400,10,1.0
+"""
+
+
+@pytest.mark.system
+def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path) -> None:
+    if not (build_dir / "bin" / "fiberdem").is_file():
+        pytest.skip("fiberdem not built")
+    camp = tmp_path / "camp"
+    camp.mkdir()
+    (camp / "base.yaml").write_text(TINY_BASE)
+    (camp / "campaign.yaml").write_text(TINY_CAMPAIGN)
+    (camp / "experiments.csv").write_text(TINY_EXPERIMENTS)
+    out = tmp_path / "result.json"
+    cmd = [sys.executable, str(RUNNER), "--campaign", str(camp / "campaign.yaml"), "--runs", "runs/c",
+           "--reduced", "--out", str(out)]
+    env = {**__import__("os").environ, "FIBERFORM_BUILD": str(build_dir)}
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, errors="replace", timeout=900, env=env)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    res = json.loads(out.read_text())
+    assert [p["name"] for p in res["points"]] == ["A"] and res["seeds"] == 1 and not res["failures"]
+    # SEM factor: sheet 2 (1.0 ug) / case B (2 x 2.2 ug); A maps to 0.5 ug = sheet 1 (0 um)
+    assert res["points"][0]["experimental_mass_kg"] == pytest.approx(0.5e-9)
+    assert res["points"][0]["press_target_m"] == pytest.approx(2.0e-6)
+    (v,) = res["variants"]
+    assert (v["point"], v["section"], v["seed"]) == ("A", "circular", "3")
+    # every stage ran: the lay-down, both permeabilities and the press report their numbers
+    for key in ("sheet_thickness_m", "permeability_cfm", "press_plate_gap_m", "permeability_press_cfm"):
+        assert float(v[key]) > 0.0, key
+    assert float(v["fiber_mass_kg"]) >= 2.2e-9
+    stats = res["summary"]["A-circular"]
+    assert stats["permeability_cfm"]["n"] == 1.0
+    assert stats["permeability_cfm"]["mean"] == pytest.approx(float(v["permeability_cfm"]))
+    scene = (tmp_path / "runs" / "c" / "scenes" / "A-circular.yaml").read_text()
+    assert "overlap_action: stop" in scene
+    # resumed: a second call finds every stage up to date
+    again = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, errors="replace", timeout=300, env=env)
+    assert again.returncode == 0, again.stdout[-3000:] + again.stderr[-3000:]
+    assert "up to date" in again.stdout and "done in" not in again.stdout, again.stdout[-3000:]
