@@ -160,7 +160,7 @@ def test_stock_wall_gran_side_walls_confine_the_fibers(
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     work = tmp_path / "runs" / "tiny_wall_gran" / "laydown" / "work"
     text = (work / "in.laydown").read_text()
-    assert text.count("wall/gran model hertz") == 4 and "plane" not in text.split("fiber/yarns")[1]
+    assert text.count("wall/gran model hertz") == 4 and "plane" not in text.split("wall/fiber/yarns")[1]
     frames = read_dump(work / "traj.dump")
     lo, hi, r = 0.0, 1.0e-3, 10e-6
     nearest = math.inf

@@ -73,10 +73,10 @@ def line_of(extra: str, style: str) -> str:
 
 
 def test_contact_integrator_reaches_the_yarn_and_wall_fixes() -> None:
-    assert "integrator cvode" in line_of("", "fiber/yarns")
+    assert "integrator cvode" in line_of("", "wall/fiber/yarns")
     sub = line_of(", yarn_contact: averaged, contact_integrator: substep, contact_substeps: 40",
-                  "fiber/yarns")
-    assert "integrator substep" in sub and value(sub, "substeps") == "40"
+                  "wall/fiber/yarns")
+    assert value(sub, "substep") == "40"
     assert value(sub, "implicit_force") == "impulse"
     wall = line_of(", walls: wall_fiber_dlvo, contact_integrator: substep, contact_substeps: 40",
                    "wall/fiber/dlvo")
@@ -87,7 +87,7 @@ def test_contact_integrator_reaches_the_yarn_and_wall_fixes() -> None:
 def test_yarn_contact_newton_is_the_implicit_default() -> None:
     from fiberform.errors import SceneError
 
-    assert value(line_of("", "fiber/yarns"), "implicit_force") == "newton"
+    assert value(line_of("", "wall/fiber/yarns"), "implicit_force") == "newton"
     with pytest.raises(SceneError, match="yarn_contact"):
         parse_scene(yaml.safe_load(BASE % ", beam_integrator: explicit, yarn_contact: newton"),
                     "fields.yaml")

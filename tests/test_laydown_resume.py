@@ -151,3 +151,26 @@ def test_no_fiber_passes_through_another(reference: tuple[Path, Path]) -> None:
     r = 10e-6
     assert gaps.min() > -0.05 * r, gaps.min()
     assert gaps.min() < 50e-9, gaps.min()
+
+
+def test_resume_after_a_removal_lists_only_the_fibers_left(tmp_path: Path) -> None:
+    """A lay-down resumed from a restart written after fix fiber/remove took fibers out: the nodes
+    file handed to fix fiber/beam lists the fibers left (it refuses atoms the restart file lacks);
+    removals after the restart step are not applied (they happen again in the resumed run)."""
+    from fiberform.stages.laydown import EARLIER_LOG, LOG_NAME, nodes_left, prepare_resume
+
+    work = tmp_path / "work"
+    work.mkdir()
+    src = tmp_path / "fibers.nodes"
+    # 4 fibers (IDs 1-4) of 2 nodes each: atom fiber node count ...
+    src.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
+                                          for f in range(4) for k in range(2)))
+    (work / "traj.dump").write_text("")
+    (work / LOG_NAME).write_text("fix fiber/remove: step 1000 removed fiber(s) 2\n"
+                                 "fix fiber/remove: step 3000 removed fiber(s) 4\n")
+    prepare_resume(work, 2000)
+    assert "step 1000" in (work / EARLIER_LOG).read_text()
+    nodes_left(work, src)
+    rows = [ln.split() for ln in (work / "fibers.nodes").read_text().splitlines() if not ln.startswith("#")]
+    assert sorted({int(r[1]) for r in rows}) == [1, 3, 4]
+    assert len(rows) == 6

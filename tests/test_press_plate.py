@@ -2,11 +2,11 @@
 """The press plate (fix wall/fiber/dlvo ``servo``, ``stop``) on a real fiber in fiberdem.
 
 A straight fiber (0.5 mm, radius 10 um, E 10 GPa, 1500 kg/m^3, 11 nodes, implicit integrator at
-1 us) lies across two yarns (radius 50 um, 0.4 mm apart; fix fiber/yarns, implicit_force newton,
+1 us) lies across two yarns (radius 50 um, 0.4 mm apart; fix wall/fiber/yarns, implicit_force newton,
 friction 0.5) in water at rest (fix fiber/drag: zero flow, gravity, buoyancy). The plate comes down
 from 2 um above the fiber, ramps to a target pressure p_t in 0.1 ms and holds it; plate area
-A = 1 mm^2 (nominal). At rest, with the plate force F_p and the yarn reaction F_y (fix fiber/yarns
-vector 9-11), both forces on the fiber:
+A = 1 mm^2 (nominal). At rest, with the plate force F_p and the yarn reaction F_y (fix wall/fiber/yarns
+vector 4-6), both forces on the fiber:
 
     F_p,z + F_y,z - W = 0,   W = (rho_f - rho) V g  (net weight; computed here from the geometry)
 
@@ -55,9 +55,9 @@ def _press(build: Path, work: Path, p_t: float) -> np.ndarray:
     z0 = 2 * R + 2e-6
     steps = round((RAMP + HOLD) / DT) + 300  # + the approach (about 2 um at 5 mm/s)
     names = ("fpz", "p", "pt", "tc", "fyz")
-    refs = ("f_plate[9]", "f_plate[12]", "f_plate[13]", "f_plate[14]", "f_yarns[11]")
+    refs = ("f_plate[9]", "f_plate[12]", "f_plate[13]", "f_plate[14]", "f_yarns[6]")
     cmds = [f"fix drag all fiber/drag flow uniform 0 0 0 fluid_density {RHO_F!r} gravity 0 0 {-G!r}",
-            f"fix yarns all fiber/yarns yarns {yarns.resolve()} implicit_force newton terms steric "
+            f"fix yarns all wall/fiber/yarns yarns {yarns.resolve()} implicit_force newton terms steric "
             "friction 0.5",
             f"fix plate all wall/fiber/dlvo plane 0 0 {z0!r} 0 0 -1 servo {AREA!r} 5e-3 "
             f"{0.1 * p_t!r} 3 0 0 {RAMP!r} {p_t!r} 1 {p_t!r} stop {z0 - 1e-6!r} terms steric "

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The lay-down's settle criterion at scale (issue 10, deliver 5): fix fiber/yarns ``settle V M
-settle_measure fiber settle_mass_fraction q`` counts consecutive checks at which the fibers carrying
+"""The lay-down's settle criterion at scale (issue 10, deliver 5): fix fiber/settle ``V M
+measure fiber mass_fraction q`` counts consecutive checks at which the fibers carrying
 the fraction q of the mass move slower than V (physics/settle.h; unit test test_settle.cpp).
 
 Ten fibers of 0.4 mm at rest (no gravity, no flow, nothing touching) and one fine of 0.1 mm
@@ -51,10 +51,8 @@ def _settled(work: Path, build_dir: Path, fraction: float, sinking: bool, ranks:
              "newton on", "communicate single vel yes", f"processors {ranks} 1 1", "read_data data.fib",
              f"neighbor {0.1 * R!r} bin", "neigh_modify delay 0",
              f"fix beam all fiber/beam nodes nodes.fib E 10e9 G 4e9 density {RHO!r}",
-             # a far plane: the fix needs a body; the settle counter is what is tested
-             f"fix yarns all fiber/yarns plane 0 0 0 0 0 1 settle {V_SETTLE!r} {EVERY} settle_measure fiber "
-             f"settle_mass_fraction {fraction!r}",
-             *motion, "timestep 1e-6", "thermo_style custom step f_yarns[7]", f"thermo {STEPS}",
+             f"fix settle all fiber/settle {V_SETTLE!r} {EVERY} measure fiber mass_fraction {fraction!r}",
+             *motion, "timestep 1e-6", "thermo_style custom step f_settle[1]", f"thermo {STEPS}",
              f"run {STEPS}"]
     out = run_fiberdem_thermo(work, build_dir, lines, ["step", "settled"], ranks=ranks)
     return float(out["settled"][-1])

@@ -1,5 +1,6 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later
-   Keyword parsing shared by pair_style fiber/dlvo and fix wall/fiber/dlvo (SI units). */
+   Keyword parsing shared by pair_style fiber/dlvo, fix wall/fiber/dlvo and fix wall/fiber/yarns (SI
+   units). */
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -63,6 +64,7 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
     if (!std::strcmp(v, "newton")) { c.implicit_newton = true; return 2; }
     lmp->error->all(FLERR, "implicit_force: expected position | impulse | newton");
   }
+  if (!std::strcmp(kw, "friction")) { c.friction = num(1, false); return 2; }
   if (!std::strcmp(kw, "rtol")) { c.rtol = num(1); return 2; }
   if (!std::strcmp(kw, "atol")) { c.atol = num(1); return 2; }
   if (!std::strcmp(kw, "terms")) {
@@ -155,6 +157,7 @@ void validate_contact_config(LAMMPS *lmp, const char *style, EngineConfig &c) {
   if (c.section == Section::Rect && !(c.width > 0 && c.thickness > 0)) fail("section rect needs W > 0 and T > 0");
   if (!(c.rtol > 0 && c.rtol < 1)) fail("rtol must be in (0, 1)");
   if (c.npoints > 100000) fail("points: at most 100000 per element");
+  if (!(c.friction >= 0)) fail("friction must be >= 0");
 }
 
 }  // namespace fiberform

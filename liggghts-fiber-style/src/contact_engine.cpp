@@ -14,6 +14,7 @@
 #include "lammps.h"
 #include "neigh_list.h"
 #include "physics/contact_geometry.h"
+#include "physics/friction.h"
 
 using namespace LAMMPS_NS;
 
@@ -465,6 +466,20 @@ void ContactEngine::wall(const Plane &pl, int groupbit, double dt, bool subinteg
       ++stats.solves;
       stats.rhs_evals += r.rhs_evals;
       if (!r.ok) ++stats.failures;
+      const double fn = dot(r.fvel1, pl.normal);
+      if (cfg.friction > 0.0 && fn > 0.0) {
+        // Coulomb friction of the point on the plane (physics/friction.h): the same tangential
+        // force in both averages, an impulse ft dt over the step
+        const Vec3 vrel = s1.v - pl.velocity;
+        const double v[3] = {vrel.x, vrel.y, vrel.z}, a[3] = {s1.a.x, s1.a.y, s1.a.z};
+        const double n[3] = {pl.normal.x, pl.normal.y, pl.normal.z};
+        const double gamma = beam_ && beam_->implicit() ? beam_->gamma_eff() : 1.0;
+        double ft[3];
+        const double c = physics::coulomb_stick_slip(v, a, n, s1.inv_m, gamma * dt, cfg.friction * fn, ft);
+        const Vec3 t{c * ft[0], c * ft[1], c * ft[2]};
+        apply(A, k, r_off, r.fpos1 + t, r.fvel1 + t, out, true);
+        continue;
+      }
       apply(A, k, r_off, r.fpos1, r.fvel1, out, true);
     }
   }

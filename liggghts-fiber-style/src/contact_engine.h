@@ -49,6 +49,9 @@ struct EngineConfig {
   // position landing with the external loads as a0 (default), or the impulse with every force as a0
   bool implicit_impulse = false;
   bool implicit_newton = false;  // fix wall/fiber/dlvo: the plane inside the fibers' Newton solves
+  // Coulomb friction coefficient against static bodies (fix wall/fiber/dlvo, fix wall/fiber/yarns;
+  // physics/friction.h averaged, physics/static_bodies.h inside the Newton solve); 0: none
+  double friction = 0.0;
 };
 
 struct EngineStats {

@@ -57,7 +57,7 @@ void FiberContactFix::init() {
   reach_ = interaction_reach();
   beam_ = FixFiberBeam::find(lmp);
   if (implicit_beam() && !beam_->precedes(this))
-    error->all(FLERR, "fiber contact (pair_style fiber/dlvo, fix wall/fiber/dlvo): define it after fix "
+    error->all(FLERR, "fiber contact (pair_style fiber/dlvo, fix wall/fiber/dlvo, fix wall/fiber/yarns): define it after fix "
                       "fiber/beam (its velocity landing follows the implicit solve)");
 }
 

@@ -1,6 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later
    Base of the fixes that apply sub-integrated fiber contact forces (the internal fix of
-   pair_style fiber/dlvo and fix wall/fiber/dlvo). Not a style by itself.
+   pair_style fiber/dlvo, fix wall/fiber/dlvo and fix wall/fiber/yarns; the last one runs its own
+   per-contact passes over the yarns and keeps only the configuration, init and hooks of this
+   base). Not a style by itself.
 
    Why a fix: with velocity Verlet a pair style only ever sees x(t+dt) and the half-step velocity
    v(t+dt/2); the sub-integration of eq. 2.19-2.21 needs the state at the START of a fiber step

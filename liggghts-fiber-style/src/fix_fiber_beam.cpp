@@ -1285,12 +1285,8 @@ int FixFiberBeam::size_restart(int) { return NCOL + 1; }
 int FixFiberBeam::maxsize_restart() { return NCOL + 1; }
 
 void FixFiberBeam::write_restart(FILE *fp) {
-  double list[2] = {static_cast<double>(ref_done_), max_elem_len_};
-  if (comm->me == 0) {
-    const int size = sizeof(list);
-    std::fwrite(&size, sizeof(int), 1, fp);
-    std::fwrite(list, sizeof(double), 2, fp);
-  }
+  const double list[2] = {static_cast<double>(ref_done_), max_elem_len_};
+  fiberform::write_global_restart(lmp, fp, list, 2);
 }
 
 void FixFiberBeam::restart(char *buf) {

@@ -113,7 +113,7 @@ class FixFiberBeam : public Fix {
   // second time in the following steps. F in N, spatial.
   void remove_from_history(int i, const double F[3]);
   // Implicit scheme only: a force model evaluated inside every fiber's Newton solve at the fiber's
-  // end-of-step state (contact with static bodies: fix fiber/yarns `implicit_force newton`). The
+  // end-of-step state (contact with static bodies: fix wall/fiber/yarns `implicit_force newton`). The
   // registering fix owns the model. use_force_model(m, true) registers m, (m, false) removes it
   // (idempotent; call it from init); release_force_model removes m from the fix fiber/beam of lmp
   // if there still is one (call it from the registering fix's destructor).

@@ -3,7 +3,8 @@
    the contact points of fiber elements and an infinite plane: a wall (fixed) or a plate moving
    with a constant velocity, or a press plate driven by a pressure servo (physics/press_servo.h).
    The plane has infinite mass. Same integrators (cvode | substep N | none) and keywords as the pair
-   style. Documentation: docs/styles/fix_wall_fiber_dlvo.md.
+   style, plus Coulomb friction (`friction mu`; physics/friction.h, inside the Newton solve
+   physics/static_bodies.h, as fix wall/fiber/yarns). Documentation: docs/styles/fix_wall_fiber_dlvo.md.
 
    fix ID group wall/fiber/dlvo plane px py pz nx ny nz [velocity vx vy vz]
        [servo A u_max p_ref N t1 p1 ... tN pN] [stop D] [keyword value ...] */

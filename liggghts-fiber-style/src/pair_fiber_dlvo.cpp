@@ -56,6 +56,7 @@ void PairFiberDlvo::settings(int narg, char **arg) {
     iarg += used;
   }
   fiberform::validate_contact_config(lmp, "pair_style fiber/dlvo", cfg);
+  if (cfg.friction != 0.0) error->all(FLERR, "pair_style fiber/dlvo: friction acts against walls and yarns only");
   engine_->cfg = cfg;
   // the internal step fix exists from here on (so that thermo can name f_FIBER_DLVO_STEP[i])
   if (modify->find_fix(kStepFixId) < 0) {

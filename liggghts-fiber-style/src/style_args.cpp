@@ -40,4 +40,11 @@ void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *me
   std::abort();  // not reached: Error::one aborts
 }
 
+void write_global_restart(LAMMPS_NS::LAMMPS *lmp, FILE *fp, const double *values, int n) {
+  if (lmp->comm->me != 0) return;
+  const int size = n * static_cast<int>(sizeof(double));
+  std::fwrite(&size, sizeof(int), 1, fp);
+  std::fwrite(values, sizeof(double), static_cast<size_t>(n), fp);
+}
+
 }  // namespace fiberform

@@ -3,6 +3,7 @@
 #ifndef FIBERFORM_STYLE_ARGS_H
 #define FIBERFORM_STYLE_ARGS_H
 
+#include <cstdio>
 #include <string>
 
 namespace LAMMPS_NS {
@@ -27,6 +28,10 @@ double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std
 // screen and log first: LIGGGHTS 3.8 calls MPI_Abort without flushing, so a message on a piped
 // screen (a run started by Python) or in the log file is otherwise lost.
 [[noreturn]] void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *message);
+
+// A fix's global restart record (Fix::write_restart): n doubles, written by rank 0 behind their
+// size in bytes, as LIGGGHTS reads them back into Fix::restart(buf).
+void write_global_restart(LAMMPS_NS::LAMMPS *lmp, FILE *fp, const double *values, int n);
 
 }  // namespace fiberform
 

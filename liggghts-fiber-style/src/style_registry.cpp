@@ -18,7 +18,9 @@
 #include "fix_fiber_beam.h"
 #include "fix_fiber_drag.h"
 #include "fix_fiber_coupling.h"
-#include "fix_fiber_yarns.h"
+#include "fix_wall_fiber_yarns.h"
+#include "fix_fiber_remove.h"
+#include "fix_fiber_settle.h"
 
 namespace fiberform {
 namespace {
@@ -56,10 +58,16 @@ const StyleEntry kStyles[] = {
      "two-way coupling with fiberPimpleFoam -coupled (MPMD): coupled flow for fiber/drag, drag reaction "
      "sent to the fluid cells every N steps",
      nullptr, &make_fix<LAMMPS_NS::FixFiberCoupling>, nullptr},
-    {StyleKind::Fix, "fiber/yarns",
-     "static yarn chains and planes (fiber/dlvo law inside each implicit fiber solve, or sub-integrated: "
-     "CVODE or sub-steps) for fiber/beam elements; removes fibers; settle check",
-     nullptr, &make_fix<LAMMPS_NS::FixFiberYarns>, nullptr},
+    {StyleKind::Fix, "wall/fiber/yarns",
+     "the fiber/dlvo law against static yarn chains (infinite mass) for fiber/beam elements: inside each "
+     "implicit fiber solve, or sub-integrated (CVODE or sub-steps); Coulomb friction",
+     nullptr, &make_fix<LAMMPS_NS::FixWallFiberYarns>, nullptr},
+    {StyleKind::Fix, "fiber/remove",
+     "removes whole fiber/beam fibers with a node below a height every N steps; removed count and mass",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberRemove>, nullptr},
+    {StyleKind::Fix, "fiber/settle",
+     "settle check: counts consecutive checks with the node or fiber (mass-fraction) speed below V",
+     nullptr, &make_fix<LAMMPS_NS::FixFiberSettle>, nullptr},
 };
 
 const char *kind_name(StyleKind k) {

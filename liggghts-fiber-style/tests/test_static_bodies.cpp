@@ -59,7 +59,7 @@ void test_drop_on_yarns(double h, double r) {
   Fiber f = make_fiber(ne, L, r, 0.6 * r, Vec3{0, 0, R + r + 200e-9});
   b.build_bins(r + 50e-9 + 2 * L / ne);
   ContactLaw law;  // vdW + electrostatics + steric, cellulose in 1 mM water (contact_law.h)
-  law.steric.s1_damping = true;  // as fix fiber/yarns with implicit_force newton
+  law.steric.s1_damping = true;  // as fix wall/fiber/yarns with implicit_force newton
   StaticContactModel model(b, law, 0.0);
   std::vector<rod::NodeForceModel *> models{&model};
   for (rod::Node &nd : f.nodes) {

@@ -32,14 +32,20 @@ WALL_GRAN_MATERIAL: tuple[tuple[str, str, tuple[object, ...]], ...] = (
 )
 
 
-def contact_integrator_words(ld: Any, wall: bool) -> list[object]:
-    """The yarn/wall contact integrator keywords: fix wall/fiber/dlvo takes `integrator cvode` or
-    `integrator substep N`; fix fiber/yarns `integrator cvode|substep` and `substeps N`."""
+def contact_integrator_words(ld: Any) -> list[object]:
+    """The yarn/wall contact integrator keywords of fix wall/fiber/yarns and fix wall/fiber/dlvo
+    (the contact keywords of pair_style fiber/dlvo): `integrator cvode` or `integrator substep N`."""
     if ld.contact_integrator == "cvode":
         return ["integrator", "cvode"]
-    if wall:
-        return ["integrator", "substep", ld.contact_substeps]
-    return ["integrator", "substep", "substeps", ld.contact_substeps]
+    return ["integrator", "substep", ld.contact_substeps]
+
+
+def static_body_words(ld: Any) -> list[object]:
+    """The keywords that make yarns (and the ``fiber_yarns`` side planes) act as the laydown
+    section sets them: law terms, integrator, implicit_force mode, Coulomb friction."""
+    return ["terms", ident_list(ld.terms), *contact_integrator_words(ld),
+            "implicit_force", "newton" if ld.yarn_contact_mode == "newton" else "impulse",
+            "friction", ld.friction_coefficient]
 
 
 def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
@@ -79,43 +85,52 @@ def side_planes(scene: Scene) -> list[tuple[float, ...]]:
     ]
 
 
-def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str,
-                     yarn_extra: list[object]) -> None:
-    """The sheet's contacts, as the laydown section sets them: the side planes (``walls``), fix
-    fiber/yarns ``yarns`` on the yarns of ``yarns_file`` (plus ``yarn_extra`` keywords: removal,
-    settle counter) and, with a contact section, pair_style fiber/dlvo between fibers."""
+#: IDs of the generated fixes: the yarns (fix wall/fiber/yarns) and the side planes
+YARNS_FIX = "yarns"
+SIDE_WALL_IDS = ("wall0", "wall1", "wall2", "wall3")
+
+
+def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
+    """The sheet's contacts, as the laydown section sets them: the four side planes (``walls``;
+    ``fiber_yarns``: fix wall/fiber/dlvo acting as the yarns do), fix wall/fiber/yarns on the yarns
+    of ``yarns_file`` and, with a contact section, pair_style fiber/dlvo between fibers."""
     ld = scene.laydown
     assert ld is not None
     planes = side_planes(scene)
-    terms = ident_list(ld.terms)
-    plane_args: list[object] = []
-    if ld.walls == "fiber_yarns":
-        for p in planes:
-            plane_args += ["plane", *p]
+    if ld.walls == "fiber_yarns":  # the yarns' law, mode and friction (docs/stages/laydown.md)
+        for k, p in enumerate(planes):
+            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, *static_body_words(ld))
     elif ld.walls == "wall_gran":  # stock LIGGGHTS granular walls (comparison option)
         for name, style, value in WALL_GRAN_MATERIAL:
             s.command("fix", name, "all", "property/global", style, *value)
         for k, p in enumerate(planes):
             axis = "xplane" if p[3] != 0.0 else "yplane"
-            s.command("fix", f"wall{k}", "all", "wall/gran", "model", "hertz", "tangential",
+            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/gran", "model", "hertz", "tangential",
                       "no_history", "primitive", "type", 1, axis, p[0] if p[3] != 0.0 else p[1])
     else:  # the contact styles' own wall fix, one per plane
         for k, p in enumerate(planes):
-            s.command("fix", f"wall{k}", "all", "wall/fiber/dlvo", "plane", *p, "terms", terms,
-                      *contact_integrator_words(ld, wall=True))
-    s.command("fix", "yarns", "all", "fiber/yarns", "yarns", file_token(yarns_file), *plane_args,
-              *yarn_extra, *contact_integrator_words(ld, wall=False),
-              "implicit_force", "newton" if ld.yarn_contact_mode == "newton" else "impulse",
-              "terms", terms, "friction", ld.friction_coefficient)
+            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, "terms",
+                      ident_list(ld.terms), *contact_integrator_words(ld))
+    s.command("fix", YARNS_FIX, "all", "wall/fiber/yarns", "yarns", file_token(yarns_file),
+              *static_body_words(ld))
     c = scene.contact
     if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
         s.command("pair_style", "fiber/dlvo", *pair_options(scene, ld.fiber_contact_mode))
         s.command("pair_coeff", STAR, STAR)
 
 
+def static_force_refs(scene: Scene) -> list[tuple[str, int]]:
+    """(fix ID, vector index) of the x components of the static bodies' contact force on the
+    fibers (N; implicit_force newton): the yarns and, with ``walls: fiber_yarns``, the side planes
+    (y, z: the next two indices)."""
+    ld = scene.laydown
+    assert ld is not None
+    sides = [(w, 7) for w in SIDE_WALL_IDS] if ld.walls == "fiber_yarns" else []
+    return [(YARNS_FIX, 4), *sides]
+
 
 def write_yarns(path: Path, fabric_h5: Path) -> Yarns:
-    """The fabric's yarn centrelines as fix fiber/yarns reads them: ``yarn x y z radius``; returns
+    """The fabric's yarn centrelines as fix wall/fiber/yarns reads them: ``yarn x y z radius``; returns
     the yarns read (products.read_yarns)."""
     yarns = read_yarns(fabric_h5)
     pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
@@ -212,7 +227,7 @@ def fiber_com_speeds(columns: Mapping[str, Any]) -> tuple[Array, Array]:
 
 def mass_fraction_speed(mass: Array, speed: Array, fraction: float = 1.0) -> float:
     """The speed below which the bodies carrying ``fraction`` of the mass move (m/s): the largest
-    speed at fraction 1. The lay-down's settle measure of fix fiber/yarns ``settle_mass_fraction``
+    speed at fraction 1. The lay-down's settle measure of fix fiber/settle ``mass_fraction``
     (the C++ twin, physics/settle.h, decides the run; this one reports it)."""
     if fraction >= 1.0:
         return float(np.max(speed))

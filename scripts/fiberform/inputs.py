@@ -174,6 +174,18 @@ def fix_ref(fix_id: str, index: int | None = None, negate: bool = False) -> Toke
     return Token(text, _TOKEN_KEY)
 
 
+def fix_sum(refs: Sequence[tuple[str, int]]) -> Token:
+    """The sum of fix vector values, ``f_A[i]+f_B[j]+...``, as an equal-style variable's formula."""
+    if not refs:
+        raise InputFormatError("refusing an empty sum of fix values")
+    return Token("+".join(fix_ref(f, i).text for f, i in refs), _TOKEN_KEY)
+
+
+def var_ref(name: str) -> Token:
+    """A reference to an equal-style variable, ``v_NAME`` (thermo output)."""
+    return Token("v_" + fmt_ident(name), _TOKEN_KEY)
+
+
 def jump_if_at_least(variable: str, threshold: int | float, label: str,
                      marker: str = "FIBERFORM_QUIT") -> tuple[Token, ...]:
     """Arguments of ``if "${variable} >= threshold" then "print MARKER" "jump SELF label"``: leave

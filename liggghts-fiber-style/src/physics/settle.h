@@ -1,5 +1,5 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later
-   Settle criterion of the lay-down (fix fiber/yarns `settle`, docs/stages/laydown.md "Settling"):
+   Settle criterion of the lay-down (fix fiber/settle, docs/stages/laydown.md "Settling"):
    the speed below which a given fraction of the fiber mass moves. Pure function, SI units.
 
    With fraction 1 it is the largest speed (every fiber must be slower than the threshold). With a

@@ -3,9 +3,9 @@
    (polyline segments with a radius) and planes, all of infinite mass; their contact geometry with
    fiber elements and nodes; and StaticContactModel, the contact of one fiber with these bodies as
    a force model INSIDE the implicit fiber step (physics/implicit_rod.h, NodeForceModel).
-   Pure classes, SI units, no LIGGGHTS dependency. Used by fix fiber/yarns (both integrators);
+   Pure classes, SI units, no LIGGGHTS dependency. Used by fix wall/fiber/yarns (both integrators) and fix wall/fiber/dlvo (implicit_force newton);
    unit-tested in tests/test_static_bodies.cpp; documented in docs/models/contact.md
-   ("Static bodies in the implicit step") and docs/styles/fix_fiber_yarns.md.
+   ("Static bodies in the implicit step") and docs/styles/fix_wall_fiber_yarns.md.
 
    Geometry: an element (straight segment xa-xb of fiber radius r) against a yarn acts at the closest
    points of the two centre lines, per yarn the segment with the smallest gap h = |d| - r - R

@@ -50,8 +50,9 @@ class LaydownSection(_Section):
         "m", default=None, ge=-10.0, le=10.0,
     )  # fmt: skip
     walls: Literal["fiber_yarns", "wall_fiber_dlvo", "wall_gran"] = choice(
-        "The four vertical side planes: fiber_yarns (planes of fix fiber/yarns, fiber/dlvo law, "
-        "sub-stepped), wall_fiber_dlvo (fix wall/fiber/dlvo of the contact styles) or wall_gran "
+        "The four vertical side planes: fiber_yarns (fix wall/fiber/dlvo acting as the yarns do: "
+        "their law terms, yarn_contact mode and friction), wall_fiber_dlvo (fix wall/fiber/dlvo with "
+        "the law terms and contact integrator only) or wall_gran "
         "(stock LIGGGHTS fix wall/gran, Hertz, frictionless; for comparisons)",
         default="fiber_yarns",
     )
@@ -59,8 +60,9 @@ class LaydownSection(_Section):
         "Terms of the fiber/dlvo law against yarns and walls", default=["steric"]
     )
     friction_coefficient: float = quantity(
-        "Coulomb friction coefficient of fibers on yarns and side planes (fix fiber/yarns, "
-        "velocity-level stick/slip; 0: frictionless as the fiber/dlvo law)", "1", default=0.0,
+        "Coulomb friction coefficient of fibers on yarns and fiber_yarns side planes (keyword "
+        "friction of fix wall/fiber/yarns and fix wall/fiber/dlvo; 0: frictionless as the "
+        "fiber/dlvo law)", "1", default=0.0,
         ge=0.0, le=10.0,
     )  # fmt: skip
     contact_integrator: Literal["cvode", "substep"] = choice(

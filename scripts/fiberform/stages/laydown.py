@@ -3,15 +3,16 @@
 Kettil 2016 sec. 3.1-3.3).
 
 fiberdem runs fix fiber/beam (flexible fibers), fix fiber/drag (drag eq. 2.14-2.16 in the frozen
-grid of the flow stage, gravity, buoyancy) and fix fiber/yarns (fabric yarns as static cylinder
-chains and the four vertical side planes under the fiber/dlvo law, inside each fiber's implicit
-solve by default; removal of whole fibers below the removal height; the settle counter). The
+grid of the flow stage, gravity, buoyancy), fix wall/fiber/yarns (fabric yarns as static cylinder
+chains under the fiber/dlvo law, inside each fiber's implicit solve by default), one fix
+wall/fiber/dlvo per vertical side plane, fix fiber/remove (removal of whole fibers below the
+removal height) and fix fiber/settle (the settle counter). The
 input is built through fiberform.inputs only. fiberdem runs on ``laydown.ranks`` MPI ranks and
 writes restart files every ``restart_interval_s``; ``--resume`` continues a killed run from the
 last complete one (docs/stages/laydown.md, "Resuming").
 
 The run is a sequence of ``run`` commands of ``check_interval_s`` each; after each, the input ends
-once fix fiber/yarns has counted ``settle_checks`` consecutive checks with every node slower than
+once fix fiber/settle has counted ``settle_checks`` consecutive checks with every node slower than
 ``settle_speed_m_s`` (the settle criterion), else it ends at ``max_time_s``. A snapshot of every
 node is dumped at each check (``traj.dump``); the last snapshot is the sheet.
 
@@ -41,7 +42,7 @@ import numpy.typing as npt
 
 from ..coupling_map import MAP_NAME, ExchangeGrid, exchange_map, write_exchange_map
 from ..errors import StageError
-from ..fiber_io import fiber_preamble
+from ..fiber_io import NODES_NAME, fiber_preamble, write_nodes_subset
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
     mass_fraction_speed, pair_options, sheet_thickness, write_sheet_png, write_sheet_vtu, write_yarns,
@@ -63,7 +64,8 @@ __all__ = ["Laydown", "build_input", "sheet_thickness"]
 Array = npt.NDArray[np.float64]
 H5_NAME, VTU_NAME, PNG_NAME, REPORT_NAME = "laydown.h5", "sheet.vtu", "laydown.png", "report.md"
 INPUT_NAME, LOG_NAME, TRAJ_NAME, YARNS_NAME = "in.laydown", "log.fiberdem", "traj.dump", "yarns.txt"
-_REMOVED = re.compile(r"fix fiber/yarns: step (\d+) removed fiber\(s\)((?: \d+)+)")
+_REMOVED = re.compile(r"fix fiber/remove: step (\d+) removed fiber\(s\)((?: \d+)+)")
+REMOVE_FIX, SETTLE_FIX = "remove", "settle"  # fix fiber/remove, fix fiber/settle
 RESTART_STEM, RESTART_EXT = "laydown", "restart"  # restart files laydown.<step>.restart
 _RESTART = re.compile(r"laydown\.(\d+)\.restart")
 _SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
@@ -161,20 +163,23 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
-    contact_commands(s, scene, YARNS_NAME, [
-        "remove_below", removal_height(scene), "remove_every", steps_per_check,
-        "settle", settle_speed if settle_speed is not None else ld.settle_speed_m_s,
-        steps_per_check, "settle_measure", ld.settle_measure,
-        *(["settle_mass_fraction", ld.settle_mass_fraction] if ld.settle_measure == "fiber" else [])])
+    contact_commands(s, scene, YARNS_NAME)
+    # removal of whole fibers below the removal height and the settle counter, every check
+    s.command("fix", REMOVE_FIX, "all", "fiber/remove", "below", removal_height(scene),
+              "every", steps_per_check)
+    s.command("fix", SETTLE_FIX, "all", "fiber/settle",
+              settle_speed if settle_speed is not None else ld.settle_speed_m_s, steps_per_check,
+              "measure", ld.settle_measure,
+              *(["mass_fraction", ld.settle_mass_fraction] if ld.settle_measure == "fiber" else []))
     cp = scene.coupling
     if two_way(scene) and cp is not None:
         # the fluid's cell velocities replace flow.grid at the first run (docs/coupling/launch.md)
         s.command("fix", "couple", "all", "fiber/coupling", "drag", "drag", "interval", cp.interval,
                   "timeout", cp.timeout_s, "reaction", "yes" if cp.reaction == "on" else "no")
     s.command("timestep", ld.timestep_s)
-    s.command("variable", "settled", "equal", fix_ref("yarns", 7))
-    s.command("thermo_style", "custom", "step", "atoms", fix_ref("yarns", 1), fix_ref("yarns", 2),
-              fix_ref("yarns", 7), fix_ref("yarns", 8), fix_ref("drag", 3))
+    s.command("variable", "settled", "equal", fix_ref(SETTLE_FIX, 1))
+    s.command("thermo_style", "custom", "step", "atoms", fix_ref(REMOVE_FIX, 1), fix_ref(REMOVE_FIX, 2),
+              fix_ref(SETTLE_FIX, 1), fix_ref(SETTLE_FIX, 2), fix_ref("drag", 3))
     s.command("thermo_modify", "lost", "ignore")  # losses are caught by the accounting by fiber ID
     s.command("thermo", steps_per_check)
     s.command("dump", "traj", "all", "custom", steps_per_check, file_token(TRAJ_NAME), "id", "mass",
@@ -327,6 +332,7 @@ class Laydown(Stage):
             atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
         else:
             prepare_resume(work, resume_step)
+            nodes_left(work, paths["fibers_nodes"])
         write_yarns(work / YARNS_NAME, paths["fabric_h5"])
         (work / INPUT_NAME).write_text(render_input(scene, self._superficial_velocity(ctx), resume_step))
         if two_way(scene) and resume_step is None:
@@ -685,6 +691,18 @@ def prepare_resume(work: Path, step: int) -> None:
             (work / f"{RESTART_STEM}.{s}.{RESTART_EXT}").unlink()
 
 
+def nodes_left(work: Path, nodes: Path) -> None:
+    """The working folder's nodes file of a resumed run: the fibers of ``nodes`` (the generated
+    fibers) less those removed up to the restart step (the log lines prepare_resume kept): fix
+    fiber/beam wants every fiber it lists to be in the restart file."""
+    earlier = work / EARLIER_LOG
+    text = earlier.read_text(errors="replace") if earlier.is_file() else ""
+    removed = {int(i) - 1 for m in _REMOVED.finditer(text) for i in m.group(2).split()}
+    fibers = {int(line.split("#", 1)[0].split()[1]) - 1 for line in nodes.read_text().splitlines()
+              if line.split("#", 1)[0].split()}
+    write_nodes_subset(nodes, work / NODES_NAME, sorted(fibers - removed))
+
+
 def json_list(items: list[str]) -> str:
     return json.dumps(items)
 
@@ -713,7 +731,9 @@ def approximations(scene: Scene) -> list[str]:
         "drag per element at its centre",
         "yarn contact per fiber element (closest points of the element's and the yarn segment's "
         "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
-        "node; radius max(a1, a2); "
+        + ("node" if ld.yarn_contact_mode == "newton"
+           else "contact point of the elements (fix wall/fiber/dlvo)")
+        + "; radius max(a1, a2); "
         + ("the law acts inside each fiber's implicit Newton solve at the end-of-step state "
            "(yarn_contact newton; steric servo S1 in PD form: every fiber-yarn collision sticks)"
            if ld.yarn_contact_mode == "newton" else
@@ -724,7 +744,7 @@ def approximations(scene: Scene) -> list[str]:
         + f", terms {','.join(ld.terms)}; Coulomb friction {ld.friction_coefficient:g} on yarns "
         "and planes (" + ("regularised stick/slip inside the Newton solve"
                           if ld.yarn_contact_mode == "newton" else
-                          "velocity-level stick/slip in fix fiber/yarns")
+                          "velocity-level stick/slip, physics/friction.h")
         + "; not part of the thesis' law)",
         "fibers are removed whole when any node passes the removal height",
     ]

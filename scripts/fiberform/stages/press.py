@@ -37,11 +37,13 @@ import numpy as np
 from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, write_nodes_subset
 from ..fiber_sheet import (
-    Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
-    frame_fibers, sheet_thickness, solid_fraction_profile, write_sheet_png, write_sheet_vtu,
-    write_yarns,
+    YARNS_FIX, Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
+    frame_fibers, sheet_thickness, solid_fraction_profile, static_force_refs, write_sheet_png,
+    write_sheet_vtu, write_yarns,
 )
-from ..inputs import LiggghtsInput, dump_format, file_token, fix_ref, ident_list, jump_if_at_least
+from ..inputs import (
+    LiggghtsInput, dump_format, file_token, fix_ref, fix_sum, ident_list, jump_if_at_least, var_ref,
+)
 from ..liggghts_log import read_dump, thermo_rows, total_wall_time
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
@@ -157,10 +159,14 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     s.command("fix", "drag", "all", "fiber/drag", "flow", "uniform", 0.0, 0.0, 0.0,
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
-    contact_commands(s, scene, YARNS_NAME, [])
+    contact_commands(s, scene, YARNS_NAME)
     s.command("timestep", p.dt)
     pair = scene.contact is not None and scene.contact.model == "fiber_dlvo"
-    s.command("variable", "ovl_yarn", "equal", fix_ref("yarns", 6, negate=True))
+    s.command("variable", "ovl_yarn", "equal", fix_ref(YARNS_FIX, 3, negate=True))
+    # the yarns' (and fiber_yarns side planes') force on the fibers, x y z (N)
+    for k, axis in enumerate("xyz"):
+        s.command("variable", f"static_f{axis}", "equal",
+                  fix_sum([(f, i + k) for f, i in static_force_refs(scene)]))
     s.command("variable", "ovl_plate", "equal", fix_ref("plate", 6, negate=True))
     if pair:
         s.command("variable", "ovl_pair", "equal", fix_ref("FIBER_DLVO_STEP", 6, negate=True))
@@ -171,7 +177,7 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
     plate_words: list[object] = ["terms", ident_list(ld.terms)] + (
         ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
-        else contact_integrator_words(ld, wall=True))
+        else contact_integrator_words(ld))
     cx, cy = p.centre
 
     def plate(z: float, *motion: object) -> None:
@@ -182,8 +188,8 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     def thermo() -> None:
         s.command("thermo_style", "custom", "step", "atoms",
                   *(fix_ref("plate", k) for k in (7, 8, 9, 10, 11, 12, 13, 14, 6)),
-                  fix_ref("yarns", 6), fix_ref("FIBER_DLVO_STEP", 6) if pair else fix_ref("plate", 6),
-                  fix_ref("plate", 15), *(fix_ref("yarns", k) for k in (9, 10, 11)))
+                  fix_ref(YARNS_FIX, 3), fix_ref("FIBER_DLVO_STEP", 6) if pair else fix_ref("plate", 6),
+                  fix_ref("plate", 15), *(var_ref(f"static_f{axis}") for axis in "xyz"))
         s.command("thermo", p.every)
 
     started: list[bool] = []
