@@ -15,24 +15,29 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export WM_PROJECT_DIR := /usr/share/openfoam
 export FIBERFORM_BUILD := $(abspath $(BUILD))
 
-.PHONY: all setup packages openfoam-headers build venv demo test test-quick validate bench clean distclean help
+.PHONY: all setup packages openfoam-headers openfoam-pstream build venv demo test test-quick validate bench clean distclean help
 
 all: setup
 
 help:
 	@echo "make demo      - install, build, run the default scene ($(SCENE)) into runs/"
 	@echo "make test      - install, build, run all tests (ctest + pytest)"
-	@echo "make setup     - install missing Debian packages, OpenFOAM headers, build C++, Python venv"
+	@echo "make setup     - install missing Debian packages, OpenFOAM headers, libPstream, build C++, Python venv"
 	@echo "make validate  - longer validation runs and the reduced thesis campaign (bench/thesis/run.py --reduced)"
 	@echo "make bench     - benchmarks (write JSON + PNG under bench/*/results)"
 
-setup: packages openfoam-headers build venv
+setup: packages openfoam-headers openfoam-pstream build venv
 
 packages:
 	@bash scripts/setup/debian-packages.sh
 
 openfoam-headers: packages
 	@bash scripts/setup/openfoam-headers.sh
+
+# OpenFOAM's MPI layer rebuilt with the MPMD split (parallel coupled fluid; docs/coupling/launch.md),
+# into $(FIBERFORM_PSTREAM_DIR) (default .deps/openfoam-pstream); a few seconds, then a no-op
+openfoam-pstream: openfoam-headers
+	@bash scripts/setup/openfoam-pstream.sh
 
 $(BUILD)/CMakeCache.txt:
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release

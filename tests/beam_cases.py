@@ -88,9 +88,11 @@ class Result:
 
 def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
              pre_fix: Sequence[str] = (), partner: Sequence[str] = (),
-             timeout_s: float = 900) -> Result:
+             timeout_s: float = 900, partner_ranks: int = 1,
+             env: dict[str, str] | None = None) -> Result:
     """Write and run the case; ``partner``: a second program started under the same mpirun (MPMD,
-    one rank), e.g. ``[fiberPimpleFoam, "-coupled", "-case", dir]`` for a coupled run."""
+    ``partner_ranks`` ranks), e.g. ``[fiberPimpleFoam, "-coupled", "-case", dir]`` for a coupled
+    run. More ranks than cores are run with ``--oversubscribe``; ``env``: extra environment."""
     if case.integrator not in ("explicit", "implicit"):
         raise ValueError(f"Case.integrator must be 'explicit' or 'implicit', not {case.integrator!r}")
     work.mkdir(parents=True, exist_ok=True)
@@ -122,11 +124,13 @@ def run_case(build_dir: Path, work: Path, case: Case, ranks: int = 1,
     exe = str(build_dir / "bin" / "fiberdem")
     cmd = [exe, "-in", "in.case", "-log", "log.case", "-screen", "none"]
     if ranks > 1 or partner:
-        cmd = ["mpirun", "-np", str(ranks), *cmd]
+        total = ranks + (partner_ranks if partner else 0)
+        over = ["--oversubscribe"] if total > (os.cpu_count() or 1) else []
+        cmd = ["mpirun", *over, "-np", str(ranks), *cmd]
     if partner:
-        cmd += [":", "-np", "1", *map(str, partner)]
-    proc = subprocess.run(cmd, cwd=work, env=ENV, capture_output=True, text=True, timeout=timeout_s,
-                          errors="replace")
+        cmd += [":", "-np", str(partner_ranks), *map(str, partner)]
+    proc = subprocess.run(cmd, cwd=work, env={**ENV, **(env or {})}, capture_output=True, text=True,
+                          timeout=timeout_s, errors="replace")
     log = ((work / "log.case").read_text(errors="replace") if (work / "log.case").exists()
            else "")
     if proc.returncode != 0:

@@ -120,11 +120,15 @@ def test_coupling_section_validation() -> None:
                        ({"mode": "one_way", "reaction": "off"}, "coupling.reaction"),
                        ({"mode": "two_way", "interval": 0}, "coupling.interval"),
                        ({"mode": "two_way", "timeout_s": 0.0}, "coupling.timeout_s"),
+                       ({"mode": "two_way", "fluid_ranks": 0}, "coupling.fluid_ranks"),
+                       ({"mode": "two_way", "fluid_ranks": 1.5}, "coupling.fluid_ranks"),
+                       ({"mode": "one_way", "fluid_ranks": 2}, "coupling.fluid_ranks"),
                        ({"mode": "three_way"}, "coupling.mode")):
         with pytest.raises(SceneError) as err:
             scene(bad)
         assert any(field in p for p in err.value.problems), err.value.problems
     assert scene({"mode": "one_way"}).coupling.mode == "one_way"
+    assert scene({"mode": "two_way", "fluid_ranks": 3}).coupling.fluid_ranks == 3
     # 5000 steps per check (5e-4 s / 1e-7 s): 300 does not divide them, 250 does
     problems = Laydown().check_scene(scene({"mode": "two_way", "interval": 300}))
     assert any("coupling.interval = 300" in p for p in problems), problems

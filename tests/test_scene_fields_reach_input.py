@@ -42,7 +42,8 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "restart_interval_s": 1.0e-3, "ranks": 2, "fiber_contact": "newton",
         "settle_mass_fraction": 0.99, "tangent_steps": 50,
     },
-    "coupling": {"mode": "two_way", "interval": 250, "timeout_s": 60.0, "reaction": "off"},
+    "coupling": {"mode": "two_way", "interval": 250, "timeout_s": 60.0, "reaction": "off",
+                 "fluid_ranks": 2},
     "contact": {
         "integrator": "cvode", "terms": ["vdw", "steric"], "hamaker_J": 1.0e-20,
         "ionic_strength_mol_m3": 2.0, "surface_potential_V": -0.03, "cutoff_m": 3.0e-8,
@@ -53,6 +54,8 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
 SINGLE_CHOICE = {("contact", "model")}
 # fields that configure how fiberdem is launched, not its input
 LAUNCH = {("laydown", "ranks")}
+# fields that configure the coupled launch (one mpirun for fiberdem and fiberPimpleFoam)
+COUPLED_LAUNCH = {("coupling", "fluid_ranks")}
 # laydown fields that act only together with other laydown values (set in both renderings)
 NEEDS: dict[tuple[str, str], dict[str, object]] = {("laydown", "settle_mass_fraction"): {"settle_measure": "fiber"}}
 # coupling fields other than mode only act with mode two_way: their base scene is two-way
@@ -99,6 +102,15 @@ def test_field_changes_the_generated_input(section: str, field: str) -> None:
         assert (laydown.launch(scene_with(base=newton), build)
                 != laydown.launch(scene_with(section, field, newton), build)), \
             f"{section}.{field} does not reach the fiberdem launch"
+        return
+    if (section, field) in COUPLED_LAUNCH:
+        build = Path("build")
+        base_cmd = laydown.coupled_launch(scene_with(section, "mode"), build, oversubscribe=True)
+        alt_cmd = laydown.coupled_launch(scene_with(section, field), build, oversubscribe=True)
+        assert base_cmd != alt_cmd, f"{section}.{field} does not reach the coupled launch"
+        # the value itself reaches mpirun: -np fluid_ranks for the fluid, which runs -parallel
+        fluid = alt_cmd[alt_cmd.index(":") + 1:]
+        assert fluid[:2] == ["-np", str(ALTERNATIVES[section][field])] and "-parallel" in fluid
         return
     needs = NEEDS.get((section, field))
     base = render(base=needs, base_section=section if section == "coupling" and field != "mode" else None)

@@ -25,11 +25,13 @@ Description
     -coupled: two-way coupling with fiberdem (fix fiber/coupling) under one
     mpirun (coupling/layer): one step of interval x fiber step per exchange,
     fiberSource = fiberSource0 + reaction / (rho V); see coupledRun.H and
-    docs/coupling/launch.md.
+    docs/coupling/launch.md. -coupled -parallel: the fluid on several ranks,
+    with OpenFOAM's libPstream rebuilt with the MPMD split
+    (scripts/setup/openfoam-pstream.sh, through LD_LIBRARY_PATH).
 
 Restrictions
-    Static mesh (no dynamicMeshDict motion), no MRF zones. -coupled: serial,
-    a uniform axis-aligned blockMesh box, no restart.
+    Static mesh (no dynamicMeshDict motion), no MRF zones. -coupled: a uniform
+    axis-aligned blockMesh box or constant/fiberExchangeMap.
 
 \*---------------------------------------------------------------------------*/
 
@@ -39,10 +41,21 @@ Restrictions
 #include "pimpleControl.H"
 #include "fvOptions.H"
 
+#include "coupledCells.H"
 #include "coupling_layer.h"
 #include "exchange_map.h"
 
+#include <dlfcn.h>
+
 #include <cstring>
+#include <memory>
+
+// The communicator of this program's ranks exported by the rebuilt libPstream
+// (scripts/setup/openfoam-pstream.sh); nullptr with Debian's stock library.
+static MPI_Comm* fiberformPstreamWorld()
+{
+    return static_cast<MPI_Comm*>(dlsym(RTLD_DEFAULT, "fiberform_pstream_world"));
+}
 
 // * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * //
 
@@ -57,9 +70,9 @@ int main(int argc, char *argv[])
     argList::addBoolOption
     (
         "coupled",
-        "two-way coupling with fiberdem under one mpirun (MPMD, serial fluid):"
-        " fiberSource gets the fibers' reaction every exchange;"
-        " see docs/coupling/launch.md"
+        "two-way coupling with fiberdem under one mpirun (MPMD; with -parallel"
+        " the rebuilt libPstream is needed): fiberSource gets the fibers'"
+        " reaction every exchange; see docs/coupling/launch.md"
     );
     argList::addOption
     (
@@ -68,10 +81,13 @@ int main(int argc, char *argv[])
         "deadline of each blocking coupling exchange in s (default 300)"
     );
 
-    // Coupled mode: this solver starts MPI itself, before OpenFOAM parses the arguments, and splits
-    // MPI_COMM_WORLD by MPI_APPNUM (coupling/layer). Serial OpenFOAM never touches MPI, so Debian's
-    // stock libraries work. A parallel fluid needs a rebuilt libPstream
-    // (scripts/setup/openfoam-pstream.sh) and is not coupled in this version.
+    // Coupled mode, serial fluid: this solver starts MPI itself, before OpenFOAM parses the
+    // arguments, and splits MPI_COMM_WORLD by MPI_APPNUM (coupling/layer start_world). Serial
+    // OpenFOAM never touches MPI, so Debian's stock libraries work.
+    // Coupled mode, parallel fluid (-parallel): OpenFOAM starts MPI, and the rebuilt libPstream
+    // (scripts/setup/openfoam-pstream.sh) splits MPI_COMM_WORLD by MPI_APPNUM in UPstream::init;
+    // the coupling layer connects over that same split (join_world below), never splitting again.
+    // Debian's stock libPstream would take the fibers' ranks for fluid ranks and hang: refused here.
     bool coupled = false, parallel = false;
     for (int i = 1; i < argc; ++i)
     {
@@ -80,24 +96,35 @@ int main(int argc, char *argv[])
     }
     if (coupled)
     {
-        if (parallel)
+        if (parallel && !fiberformPstreamWorld())
         {
             std::fprintf
             (
                 stderr,
-                "fiberPimpleFoam: -coupled runs the fluid serially in this version;"
-                " remove -parallel (docs/coupling/launch.md)\n"
+                "fiberPimpleFoam: -coupled -parallel needs OpenFOAM's libPstream rebuilt with the"
+                " MPMD split (scripts/setup/openfoam-pstream.sh, part of make setup): start with"
+                " LD_LIBRARY_PATH=<its directory, default .deps/openfoam-pstream>"
+                " (docs/coupling/launch.md)\n"
             );
             return 2;
         }
-        MPI_Init(&argc, &argv);
-        fiberform::coupling::start_world();
+        if (!parallel)
+        {
+            MPI_Init(&argc, &argv);
+            fiberform::coupling::start_world();
+        }
     }
 
     #include "postProcess.H"
 
     #include "addCheckCaseOptions.H"
     #include "setRootCaseLists.H"
+
+    if (coupled && parallel)
+    {
+        // UPstream::init has split MPI_COMM_WORLD (rebuilt libPstream): connect over that split
+        fiberform::coupling::join_world(*fiberformPstreamWorld());
+    }
     #include "createTime.H"
     #include "createMesh.H"
     #include "createControl.H"
@@ -137,9 +164,9 @@ int main(int argc, char *argv[])
 
     Info<< "End\n" << endl;
 
-    if (coupled)
+    if (coupled && !parallel)
     {
-        MPI_Finalize();
+        MPI_Finalize();  // parallel: OpenFOAM finalizes MPI when args goes out of scope
     }
 
     return 0;

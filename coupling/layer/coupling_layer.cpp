@@ -50,19 +50,25 @@ void abort_run(const std::string &self, const std::string &message) {
 
 const Session &session() { return g_session; }
 
-const Session &start_world() {
-  if (g_session.started) return g_session;
-  int wrank = 0, wsize = 1;
-  MPI_Comm_rank(MPI_COMM_WORLD, &wrank);
-  MPI_Comm_size(MPI_COMM_WORLD, &wsize);
+namespace {
+
+int world_appnum() {
   int flag = 0;
   int *app = nullptr;
   MPI_Comm_get_attr(MPI_COMM_WORLD, MPI_APPNUM, &app, &flag);
-  const int appnum = flag && app ? *app : 0;
+  return flag && app ? *app : 0;
+}
+
+// Everything after the split: with more than one program in the world, check there are exactly two
+// and build the intercommunicator (collective on MPI_COMM_WORLD).
+const Session &connect(MPI_Comm local, int appnum) {
+  int wrank = 0, wsize = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &wrank);
+  MPI_Comm_size(MPI_COMM_WORLD, &wsize);
   Session s;
   s.started = true;
   s.appnum = appnum;
-  MPI_Comm_split(MPI_COMM_WORLD, appnum, wrank, &s.local);
+  s.local = local;
   int lsize = 1;
   MPI_Comm_size(s.local, &lsize);
   if (lsize < wsize) {  // every rank sees the same answer: more than one program in the world
@@ -92,6 +98,23 @@ const Session &start_world() {
   return g_session;
 }
 
+}  // namespace
+
+const Session &start_world() {
+  if (g_session.started) return g_session;
+  int wrank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &wrank);
+  const int appnum = world_appnum();
+  MPI_Comm local = MPI_COMM_NULL;
+  MPI_Comm_split(MPI_COMM_WORLD, appnum, wrank, &local);
+  return connect(local, appnum);
+}
+
+const Session &join_world(MPI_Comm local) {
+  if (g_session.started) return g_session;
+  return connect(local, world_appnum());
+}
+
 Channel::Channel(MPI_Comm inter, double timeout_s, std::string self, std::string partner)
     : inter_(inter), timeout_(timeout_s), self_(std::move(self)), partner_(std::move(partner)) {}
 
@@ -101,6 +124,7 @@ void Channel::wait(MPI_Request *req, int n, const char *what) {
     int done = 0;
     MPI_Testall(n, req, &done, MPI_STATUSES_IGNORE);
     if (done) return;
+
     if (now_s() > deadline) {
       char buf[512];
       std::snprintf(buf, sizeof buf,

@@ -3,6 +3,7 @@
    fiberPimpleFoam -coupled (the fluid), both started under ONE mpirun in MPMD mode:
 
      mpirun -np A fiberdem -in in.coupled : -np 1 fiberPimpleFoam -coupled -case fluid
+     LD_LIBRARY_PATH=<rebuilt libPstream> mpirun -np A fiberdem ... : -np B fiberPimpleFoam -coupled -parallel ...
 
    Plain MPI, C++17, no LIGGGHTS or OpenFOAM dependency. Full description: docs/coupling/layer.md.
 
@@ -60,7 +61,13 @@ struct Session {
 /// Collective on MPI_COMM_WORLD: both programs must call it right after MPI_Init. More than two
 /// programs under one mpirun is an error (message on stderr of world rank 0, MPI_Abort).
 const Session &start_world();
-/// The session made by start_world() (started == false if it was never called).
+/// The same for a program whose MPI_COMM_WORLD was already split by MPI_APPNUM elsewhere: a parallel
+/// fiberPimpleFoam, whose rebuilt libPstream split it in UPstream::init (scripts/setup/
+/// openfoam-pstream.sh). `local` is that split (this program's ranks); the rest of start_world()
+/// (the check for two programs, the intercommunicator) runs unchanged. Collective on MPI_COMM_WORLD:
+/// pairs with the partner's start_world().
+const Session &join_world(MPI_Comm local);
+/// The session made by start_world() or join_world() (started == false if neither was called).
 const Session &session();
 
 /// Messages between the leaders of the two programs, each blocking call bounded by a deadline.

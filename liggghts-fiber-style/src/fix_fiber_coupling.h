@@ -60,6 +60,9 @@ class FixFiberCoupling : public Fix {
   std::vector<double> acc_;      // summed reaction of the current interval, N (3 per cell)
   std::int64_t steps_ = 0;       // steps accumulated in acc_
   double stats_[4] = {0, 0, 0, 0};  // exchanges, impulse given to the fluid xyz (N s)
+  // wall time of this rank (s): coupling work (spreading, sums, messages, the new flow field)
+  // and waiting for the fluid (the leader's receives: the fluid's step and its own exchange work)
+  double work_s_ = 0.0, wait_s_ = 0.0;
 };
 
 }  // namespace LAMMPS_NS

@@ -19,6 +19,7 @@ __all__ = [
     "fiberform_version",
     "git_revision",
     "package_version",
+    "pstream_dir",
     "repo_root",
 ]
 
@@ -32,6 +33,14 @@ def build_dir() -> Path:
     """``$FIBERFORM_BUILD`` if set, else ``<root>/build`` (see CONTRACTS.md)."""
     env = os.environ.get("FIBERFORM_BUILD")
     return Path(env) if env else repo_root() / "build"
+
+
+def pstream_dir() -> Path:
+    """Directory of OpenFOAM's libPstream rebuilt with the MPMD split (a coupled fluid on several
+    ranks; scripts/setup/openfoam-pstream.sh): ``$FIBERFORM_PSTREAM_DIR`` if set, else
+    ``<root>/.deps/openfoam-pstream`` (see CONTRACTS.md)."""
+    env = os.environ.get("FIBERFORM_PSTREAM_DIR")
+    return Path(env) if env else repo_root() / ".deps" / "openfoam-pstream"
 
 
 def package_version() -> str:

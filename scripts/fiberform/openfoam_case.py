@@ -45,6 +45,7 @@ from .runner import Program, openfoam_progress, run
 __all__ = [
     "CASE_DIR",
     "DRAINAGE_FO",
+    "is_time_name",
     "prepare_coupled_case",
     "read_patch_history",
     "BoxSetup",
@@ -403,7 +404,8 @@ def _nearest_layer(centres: FloatArray, z: FloatArray, tol: float) -> npt.NDArra
     return np.asarray(k, dtype=np.int64)
 
 
-def _is_number(text: str) -> bool:
+def is_time_name(text: str) -> bool:
+    """Whether a folder name is a number (an OpenFOAM time folder)."""
     try:
         float(text)
     except ValueError:
@@ -488,7 +490,7 @@ def _complete_time(d: Path) -> bool:
 
 
 def _time_dirs(d: Path) -> dict[float, Path]:
-    return {float(t.name): t for t in d.iterdir() if t.is_dir() and _is_number(t.name) and float(t.name) > 0}
+    return {float(t.name): t for t in d.iterdir() if t.is_dir() and is_time_name(t.name) and float(t.name) > 0}
 
 
 def resume_point(work: Path, key: str) -> int | None:
@@ -799,7 +801,7 @@ def prepare_coupled_case(flow_case: Path, dest: Path, fluid_step_s: float, write
     from foamlib import FoamFile
 
     times = sorted((d for d in flow_case.iterdir()
-                    if d.is_dir() and _is_number(d.name) and float(d.name) > 0),
+                    if d.is_dir() and is_time_name(d.name) and float(d.name) > 0),
                    key=lambda d: float(d.name))  # fmt: skip
     if not times:
         raise StageError(f"{flow_case}: no steady solution (run the flow stage first)")
@@ -850,7 +852,7 @@ def read_patch_history(case: Path, name: str) -> tuple[FloatArray, FloatArray]:
     files = []
     for f in (case / "postProcessing" / name).glob("*/surfaceFieldValue*.dat"):
         suffix = f.stem.partition("_")[2]
-        t0 = float(suffix) if _is_number(suffix) else float(f.parent.name) if _is_number(f.parent.name) else 0.0
+        t0 = float(suffix) if is_time_name(suffix) else float(f.parent.name) if is_time_name(f.parent.name) else 0.0
         files.append((t0, f.stat().st_mtime_ns, str(f), f))
     history: dict[float, float] = {}
     for t0, _, _, f in sorted(files):

@@ -8,6 +8,9 @@
 # OpenFOAM solver can then share one mpirun with a partner program (MPMD: fiberdem), whose first
 # collective on MPI_COMM_WORLD must be the matching split (coupling/layer start_world()).
 # Alone (no MPMD) the split holds every rank: results are those of Debian's library.
+# The split communicator is exported as the C symbol `fiberform_pstream_world` (MPI_Comm): the
+# coupled fiberPimpleFoam -parallel finds it with dlsym (its absence = stock library: refused) and
+# connects to the fibers over it (coupling/layer join_world()), so MPI_COMM_WORLD is split once.
 #
 # Nothing of the installed OpenFOAM changes: the library goes to a project directory and is used
 # through LD_LIBRARY_PATH for coupled runs only:
@@ -24,7 +27,7 @@ readonly root
 readonly src=$root/.deps/openfoam/src/Pstream/mpi
 readonly out=${FIBERFORM_PSTREAM_DIR:-$root/.deps/openfoam-pstream}
 readonly of_src=$root/.deps/openfoam/src
-readonly stamp_text="v1912 APPNUM split 1"
+readonly stamp_text="v1912 APPNUM split 2 (exported fiberform_pstream_world)"
 
 say() { printf 'openfoam-pstream: %s\n' "$*" >&2; }
 die() { say "ERROR: $*"; exit 2; }
@@ -54,10 +57,10 @@ patch_once() {  # file, perl substitution, description
 }
 u=$work/UPstream.C
 [[ $(grep -c 'MPI_COMM_WORLD' "$u") -eq 6 ]] || { say "unexpected UPstream.C (MPI_COMM_WORLD count)"; exit 1; }
-patch_once "$u" 's/(\n#include "PstreamGlobals.H"\n)/$1\n\/\/ fiberform: this program'"'"'s part of an MPMD world (split by MPI_APPNUM)\nstatic MPI_Comm fiberformWorld = MPI_COMM_NULL;\n/' "declaration"
-patch_once "$u" 's/    MPI_Comm_size\(MPI_COMM_WORLD, &numprocs\);\n    MPI_Comm_rank\(MPI_COMM_WORLD, &myRank\);\n/    \/\/ fiberform: split MPI_COMM_WORLD by MPI_APPNUM, our first collective on it (coupling\/layer)\n    {\n        int worldRank = 0, appFlag = 0;\n        int* appnum = nullptr;\n        MPI_Comm_rank(MPI_COMM_WORLD, &worldRank);\n        MPI_Comm_get_attr(MPI_COMM_WORLD, MPI_APPNUM, &appnum, &appFlag);\n        MPI_Comm_split\n        (\n            MPI_COMM_WORLD, (appFlag && appnum) ? *appnum : 0, worldRank, &fiberformWorld\n        );\n    }\n    MPI_Comm_size(fiberformWorld, &numprocs);\n    MPI_Comm_rank(fiberformWorld, &myRank);\n/' "init"
-patch_once "$u" 's/MPICommunicators_\[index\] = MPI_COMM_WORLD;\n        MPI_Comm_group\(MPI_COMM_WORLD,/MPICommunicators_[index] = fiberformWorld;\n        MPI_Comm_group(fiberformWorld,/' "worldComm"
-[[ $(grep -c 'fiberformWorld' "$u") -eq 6 ]] || { say "patch check failed (fiberformWorld count)"; exit 1; }
+patch_once "$u" 's/(\n#include "PstreamGlobals.H"\n)/$1\n\/\/ fiberform: this program'"'"'s part of an MPMD world (split by MPI_APPNUM)\nextern \"C\" { MPI_Comm fiberform_pstream_world = MPI_COMM_NULL; }\n/' "declaration"
+patch_once "$u" 's/    MPI_Comm_size\(MPI_COMM_WORLD, &numprocs\);\n    MPI_Comm_rank\(MPI_COMM_WORLD, &myRank\);\n/    \/\/ fiberform: split MPI_COMM_WORLD by MPI_APPNUM, our first collective on it (coupling\/layer)\n    {\n        int worldRank = 0, appFlag = 0;\n        int* appnum = nullptr;\n        MPI_Comm_rank(MPI_COMM_WORLD, &worldRank);\n        MPI_Comm_get_attr(MPI_COMM_WORLD, MPI_APPNUM, &appnum, &appFlag);\n        MPI_Comm_split\n        (\n            MPI_COMM_WORLD, (appFlag && appnum) ? *appnum : 0, worldRank, &fiberform_pstream_world\n        );\n    }\n    MPI_Comm_size(fiberform_pstream_world, &numprocs);\n    MPI_Comm_rank(fiberform_pstream_world, &myRank);\n/' "init"
+patch_once "$u" 's/MPICommunicators_\[index\] = MPI_COMM_WORLD;\n        MPI_Comm_group\(MPI_COMM_WORLD,/MPICommunicators_[index] = fiberform_pstream_world;\n        MPI_Comm_group(fiberform_pstream_world,/' "worldComm"
+[[ $(grep -c 'fiberform_pstream_world' "$u") -eq 6 ]] || { say "patch check failed (fiberform_pstream_world count)"; exit 1; }
 
 # --- compile with Debian's ABI flags (docs/setup/openfoam-headers.md) ---------------------------
 flags=(-std=c++14 -m64 -O3 -fPIC -Wno-attributes -DOPENFOAM=1912 -DWM_DP -DWM_LABEL_SIZE=32 -DNoRepository
@@ -67,6 +70,8 @@ for f in UPstream UOPwrite UIPread PstreamGlobals; do
 done
 mpicxx -shared -o "$work/libPstream.so" "$work"/UPstream.o "$work"/UOPwrite.o "$work"/UIPread.o \
     "$work"/PstreamGlobals.o
+nm -D --defined-only "$work/libPstream.so" | grep -q ' fiberform_pstream_world$' ||
+    { say "patch check failed (fiberform_pstream_world not exported)"; exit 1; }
 
 mkdir -p "$out"
 mv "$work/libPstream.so" "$out/libPstream.so.tmp"

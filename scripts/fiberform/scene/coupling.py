@@ -28,6 +28,13 @@ class CouplingSection(_Section):
         "Deadline of each blocking exchange on both sides (two_way): a partner silent this long "
         "ends the run with a message (status 4)", "s", default=300.0, gt=0.0, le=1e5,
     )  # fmt: skip
+    fluid_ranks: int = quantity(
+        "MPI ranks of the coupled fluid (two_way). > 1: the fluid case is decomposed into slabs "
+        "across x (decomposePar, simple) and fiberPimpleFoam runs with -parallel and OpenFOAM's "
+        "libPstream rebuilt with the MPMD split (make setup; $FIBERFORM_PSTREAM_DIR); "
+        "laydown.ranks + fluid_ranks ranks in all",
+        "1", default=1, ge=1, le=4096,
+    )  # fmt: skip
     reaction: Literal["on", "off"] = choice(
         "two_way: on sends the fibers' drag reaction to the fluid; off sends zero (the fluid "
         "evolves on its own: the one-way limit through the coupled machinery, for tests)",
@@ -37,7 +44,7 @@ class CouplingSection(_Section):
     @model_validator(mode="after")
     def _check(self) -> CouplingSection:
         if self.mode == "one_way":
-            unused = sorted({"interval", "timeout_s", "reaction"} & self.model_fields_set)
+            unused = sorted({"interval", "timeout_s", "reaction", "fluid_ranks"} & self.model_fields_set)
             if unused:
                 raise scene_problem(unused[0], "only used with mode two_way",
                                     getattr(self, unused[0]))

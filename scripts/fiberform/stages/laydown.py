@@ -52,9 +52,10 @@ from ..inputs import (
     LiggghtsInput, dump_format, file_token, fix_ref, jump_if_at_least, step_file_token,
 )
 from ..liggghts_log import read_dump, total_wall_time
-from ..openfoam_case import CASE_DIR, DRAINAGE_FO, prepare_coupled_case, read_patch_history
+from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
 from ..provenance import atomic_write_text, file_hash, write_dataset
+from .._versions import pstream_dir
 from ..runner import liggghts_progress, mpmd_command, run
 from ..scene import FluidSection, Scene
 from ._stage import Outcome, Program, Stage, StageContext
@@ -73,6 +74,7 @@ EARLIER_LOG, RESUME_STATE = "log.earlier", "resume.json"
 #: Written by prepare: the step the run starts from (null: a fresh run), read by collect.
 PREPARED_STEP = "prepared-step.json"
 FLUID_CASE = "fluid"  # the coupled fluid's OpenFOAM case in the working folder (two_way)
+FLUID_LOG = "log.fiberPimpleFoam"  # its output, in the working folder
 SHEET_RESTART, SETTLED_LABEL = "sheet.restart", "laydown_end"
 
 
@@ -112,15 +114,20 @@ def two_way(scene: Scene) -> bool:
 
 def coupled_launch(scene: Scene, build_dir: Path, oversubscribe: bool = False) -> list[str]:
     """The single mpirun (MPMD) of a two-way lay-down, run in the working folder: fiberdem on
-    laydown.ranks ranks and fiberPimpleFoam -coupled on one rank (case ``fluid``, its output in
-    ``log.fiberPimpleFoam``)."""
+    laydown.ranks ranks and fiberPimpleFoam -coupled on coupling.fluid_ranks ranks (case ``fluid``,
+    its output appended to ``log.fiberPimpleFoam``; > 1 rank: ``-parallel`` with the rebuilt
+    libPstream through LD_LIBRARY_PATH, docs/coupling/launch.md)."""
     argv, ranks = launch(scene, build_dir)
     cp = scene.coupling
     assert cp is not None
     fluid = [str((build_dir / "bin" / "fiberPimpleFoam").resolve()), "-coupled", "-case", FLUID_CASE,
              "-couplingTimeout", repr(float(cp.timeout_s))]
-    redirect = ["sh", "-c", 'exec "$0" "$@" > log.fiberPimpleFoam']  # MPI environment kept by exec
-    return mpmd_command([(argv, ranks), ([*redirect, *fluid], 1)], oversubscribe)
+    # append: every fluid rank writes to the one log (only the master prints, errors aside)
+    wrapper = ["sh", "-c", f'exec "$0" "$@" >> {FLUID_LOG}']  # MPI environment kept by exec
+    if cp.fluid_ranks > 1:
+        fluid.append("-parallel")
+        wrapper = ["env", f"LD_LIBRARY_PATH={pstream_dir().resolve()}", *wrapper]
+    return mpmd_command([(argv, ranks), ([*wrapper, *fluid], cp.fluid_ranks)], oversubscribe)
 
 
 def restart_every(scene: Scene) -> int:
@@ -311,6 +318,12 @@ class Laydown(Stage):
             if not (case / "constant" / "polyMesh").is_dir():
                 raise StageError(f"{case}: the flow stage's OpenFOAM case is missing (coupling.mode "
                                  "two_way starts from it): run `fiberform flow` first")
+            cp = ctx.scene.coupling
+            lib = pstream_dir() / "libPstream.so"
+            if cp is not None and cp.fluid_ranks > 1 and not lib.is_file():
+                raise StageError(f"{lib} missing: coupling.fluid_ranks = {cp.fluid_ranks} needs "
+                                 "OpenFOAM's libPstream rebuilt with the MPMD split (make setup, or "
+                                 "scripts/setup/openfoam-pstream.sh; $FIBERFORM_PSTREAM_DIR)")
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
         """The working folder: fresh (fibers.data, fibers.nodes, flow.grid copied in) or, with
@@ -335,6 +348,8 @@ class Laydown(Stage):
             nodes_left(work, paths["fibers_nodes"])
         write_yarns(work / YARNS_NAME, paths["fabric_h5"])
         (work / INPUT_NAME).write_text(render_input(scene, self._superficial_velocity(ctx), resume_step))
+        if two_way(scene):
+            (work / FLUID_LOG).unlink(missing_ok=True)  # the fluid ranks append to it
         if two_way(scene) and resume_step is None:
             prepare_fluid(scene, work)
         elif two_way(scene):
@@ -566,7 +581,7 @@ def prepare_fluid(scene: Scene, work: Path) -> None:
     """The coupled fluid's case in ``work/fluid``: the flow stage's case with its steady solution
     as time 0, transient controls, and the exchange map onto flow.grid's grid
     (fiberform.coupling_map)."""
-    from foamlib import FoamFieldFile
+    from foamlib import FoamFieldFile, FoamFile
 
     ld, cp = scene.laydown, scene.coupling
     assert ld is not None and cp is not None
@@ -585,23 +600,42 @@ def prepare_fluid(scene: Scene, work: Path) -> None:
                             tuple(int(n) for n in fh["grid/shape"][...]))
     cells, weights, target = exchange_map(grid, lattice, C)  # type: ignore[arg-type]
     write_exchange_map(case / "constant" / MAP_NAME, grid, len(C), cells, weights, target)
+    for stale in case.glob("processor*"):
+        shutil.rmtree(stale)
+    if cp.fluid_ranks > 1:  # the map keeps the undecomposed mesh's cell numbers (fiberPimpleFoam
+        # maps them to each rank's cells through cellProcAddressing)
+        # slabs across x, as the flow stage decomposes (Debian's OpenFOAM has no scotch)
+        with FoamFile(case / "system" / "decomposeParDict") as d:
+            d["numberOfSubdomains"] = int(cp.fluid_ranks)
+            d["method"] = "simple"
+            d["coeffs"]["n"] = [int(cp.fluid_ranks), 1, 1]
+        run(["decomposePar", "-force"], Path("log.decomposePar"), cwd=case, description="decomposePar")
 
 
-def fluid_state(work: Path, scene: Scene, step: int) -> Path | None:
-    """The coupled fluid's time folder of fiber step ``step`` (time step x timestep_s), if written."""
+def fluid_roots(case: Path) -> list[Path]:
+    """Where the coupled fluid writes its time folders: the case, or its processor* folders when
+    it ran on several ranks (decomposed)."""
+    procs = sorted(case.glob("processor*"))
+    return procs if procs else [case]
+
+
+def fluid_state(work: Path, scene: Scene, step: int) -> list[Path] | None:
+    """The coupled fluid's time folders of fiber step ``step`` (time step x timestep_s; one per
+    fluid rank), if every rank wrote its state."""
     ld, cp = scene.laydown, scene.coupling
     assert ld is not None and cp is not None
     t = step * ld.timestep_s
     case = work / FLUID_CASE
     if not case.is_dir():
         return None
-    for d in case.iterdir():
-        try:
-            if d.is_dir() and abs(float(d.name) - t) <= 1e-6 * cp.interval * ld.timestep_s:
-                return d if (d / "U").is_file() and (d / "phi").is_file() else None
-        except ValueError:
-            continue
-    return None
+    states = []
+    for root in fluid_roots(case):
+        found = [d for d in root.iterdir() if d.is_dir() and is_time_name(d.name)
+                 and abs(float(d.name) - t) <= 1e-6 * cp.interval * ld.timestep_s]
+        if not found or not ((found[0] / "U").is_file() and (found[0] / "phi").is_file()):
+            return None
+        states.append(found[0])
+    return states
 
 
 def resume_fluid(work: Path, scene: Scene, step: int) -> None:
@@ -611,18 +645,19 @@ def resume_fluid(work: Path, scene: Scene, step: int) -> None:
     from the latest time left."""
     from foamlib import FoamFile
 
-    state = fluid_state(work, scene, step)
-    assert state is not None
-    t = float(state.name)
+    states = fluid_state(work, scene, step)
+    assert states is not None
+    t = float(states[0].name)
     case = work / FLUID_CASE
-    for d in list(case.iterdir()) + list((case / "postProcessing").glob("*/*")):
-        try:
-            later = float(d.name) > t if d.parent == case else float(d.name) >= t
-        except ValueError:
+    roots = fluid_roots(case)
+    for d in [d for root in roots for d in root.iterdir()] + list((case / "postProcessing").glob("*/*")):
+        if not is_time_name(d.name):
             continue
+        later = float(d.name) > t if d.parent in roots else float(d.name) >= t
         if d.is_dir() and later:
             shutil.rmtree(d)
-    (state / "fiberSource").unlink(missing_ok=True)
+    for state in states:
+        (state / "fiberSource").unlink(missing_ok=True)
     with FoamFile(case / "system" / "controlDict") as c:
         c["startFrom"] = "latestTime"
 
