@@ -73,8 +73,10 @@ def test_case_point_is_the_shipped_case_scene(setup: tuple[cp.Campaign, list[cp.
                                               case: str, k: float, section: str) -> None:
     c, _, pts = setup
     p = next(p for p in pts if p.name == case)
-    data = cp.point_scene(c, p, section, THESIS, Path("runs/x"))  # type: ignore[arg-type]
     shipped = read_scene_yaml((THESIS / f"case-{case}-{section}.yaml").read_text())
+    # the scenes' own fiber contact (the campaign's fiber_contact override: test_fiber_contact_override)
+    own = c.model_copy(update={"fiber_contact": None})
+    data = cp.point_scene(own, p, section, THESIS, Path("runs/x"))  # type: ignore[arg-type]
     press = data.pop("press")
     for d in (data, shipped):
         d.pop("name"), d.pop("output_dir")
@@ -90,6 +92,7 @@ def test_every_point_scene_is_valid(setup: tuple[cp.Campaign, list[cp.Sheet], li
             data = cp.point_scene(c, p, section, THESIS, Path("runs/x"))
             sc = parse_scene(data, p.name)
             assert sc.press is not None and sc.press.overlap_action == "stop"
+            assert sc.laydown.fiber_contact == c.fiber_contact == "newton"
             assert sc.fibers.target_mass_kg == pytest.approx(p.mass_kg, rel=1e-6)
             slab = sc.fiber_generation.placement_hi_m[2] - sc.fiber_generation.placement_lo_m[2]
             # placement heights are written with 7 significant digits (1e-9 m at 3 mm)
@@ -203,3 +206,18 @@ def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path
     again = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, errors="replace", timeout=300, env=env)
     assert again.returncode == 0, again.stdout[-3000:] + again.stderr[-3000:]
     assert "up to date" in again.stdout and "done in" not in again.stdout, again.stdout[-3000:]
+
+
+def test_fiber_contact_override(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    """campaign.fiber_contact newton: every point scene has the fiber-fiber contact inside the
+    Newton solve, the same terms, and no sub-integrator (it belongs to the averaged contact)."""
+    c, _, pts = setup
+    c2 = c.model_copy(update={"fiber_contact": "newton"})
+    for section in ("circular", "rectangular"):
+        data = cp.point_scene(c2, pts[0], section, THESIS, Path("runs/x"))  # type: ignore[arg-type]
+        sc = parse_scene(data, "x")
+        assert sc.laydown.fiber_contact == "newton" and "integrator" not in data["contact"]
+        assert sorted(sc.contact.terms) == ["es", "steric", "vdw"]
+        base = cp.point_scene(c.model_copy(update={"fiber_contact": None}), pts[0], section, THESIS,
+                              Path("runs/x"))  # type: ignore[arg-type]
+        assert base["laydown"]["fiber_contact"] == "averaged" and base["contact"]["integrator"] == "cvode"
