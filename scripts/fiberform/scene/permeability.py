@@ -15,10 +15,11 @@ class PermeabilitySection(_Section):
     simpleFoam; Kettil 2016 sec. 4.2: Frazier / ASTM D737 condition, 125 Pa)."""
 
     density_kg_m3: float = quantity(
-        "Density of the air", "kg/m^3", default=1.204, gt=0.0, le=100.0
+        "Density of the fluid: air (the default) for the thesis' CFM; water (998.2) to compare "
+        "with the lay-down's drainage", "kg/m^3", default=1.204, gt=0.0, le=2000.0
     )
     viscosity_Pa_s: float = quantity(
-        "Dynamic viscosity of the air", "Pa s", default=1.81e-5, gt=0.0, le=1.0
+        "Dynamic viscosity of the fluid (default: air)", "Pa s", default=1.81e-5, gt=0.0, le=1.0
     )
     pressure_drop_Pa: float = quantity(
         "Pressure drop from the top to the bottom of the domain (125 Pa: ASTM D737)", "Pa",
