@@ -127,3 +127,13 @@ def test_bare_fabric_scene() -> None:
     assert sc.fibers is None and sc.laydown is None and sc.permeability is not None
     assert (sc.fabric.size_x_m, sc.fabric.size_y_m, sc.fabric.shed) == (3e-3, 3e-3, 8)
     assert sc.permeability.pressure_drop_Pa == 125.0  # ASTM D737, the thesis' CFM
+
+
+def test_bare_fabric_subgrid_scene_computes_as_the_cases() -> None:
+    """scenes/thesis/bare-fabric-subgrid.yaml: the bare fabric with the case scenes' permeability
+    settings and fabric, so that sheet and bare fabric are computed alike."""
+    bare = load_scene(THESIS / "bare-fabric-subgrid.yaml")
+    case = load_scene(_path("A", "circular"))
+    assert bare.fibers is None and bare.laydown is None
+    assert bare.permeability == case.permeability
+    assert bare.fabric == case.fabric

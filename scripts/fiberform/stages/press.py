@@ -509,7 +509,7 @@ class Press(Stage):
         _write_curve(tmp[CURVE_NAME], thick_plate, np.array(span), pressure, phase,
                      f"{scene.name}: pressure vs thickness ({pr.mode} mode)")
         summary = _summary(pr, t, pressure, thick_plate, np.array(span), np.array(phi_thick),
-                           phase, col["at_stop"] > 0.5)
+                           phase, col["at_stop"] > 0.5, float(plate_z[-1] - p.fabric_top) if guard_stop else None)
         for key, value in summary.items():
             if isinstance(value, float):
                 rg.attrs[key] = value
@@ -539,8 +539,10 @@ class Press(Stage):
 
 
 def _summary(pr: PressSection, t: Array, pressure: Array, thick_plate: Array, span: Array,
-             phi_thick: Array, phase: list[str], at_stop: Array) -> dict[str, object]:
-    """Key numbers of the run (floats stored as attributes) and report lines."""
+             phi_thick: Array, phase: list[str], at_stop: Array,
+             guard_gap: float | None = None) -> dict[str, object]:
+    """Key numbers of the run (floats stored as attributes) and report lines; ``guard_gap``: the
+    plate's height above the fabric top where the overlap guard stopped it (overlap_action stop)."""
     ph = np.array(phase)
     out: dict[str, object] = {}
     lines = []
@@ -572,8 +574,13 @@ def _summary(pr: PressSection, t: Array, pressure: Array, thick_plate: Array, sp
             lines.append(f"spring-back: span thickness {first_span * 1e6:.2f} um before, "
                          f"{float(span[rel][-1]) * 1e6:.2f} um at the end of the release")
     else:
-        lines.append(f"plate stopped at {pr.target_thickness_m * 1e6 if pr.target_thickness_m else 0:.2f} "
-                     f"um above the fabric top; pressure at the end {pressure[-1]:.4g} Pa")
+        target = pr.target_thickness_m * 1e6 if pr.target_thickness_m else 0.0
+        if guard_gap is None:
+            lines.append(f"plate stopped at {target:.2f} um above the fabric top; pressure at the end "
+                         f"{pressure[-1]:.4g} Pa")
+        else:
+            lines.append(f"plate target {target:.2f} um above the fabric top NOT reached: stopped at "
+                         f"{guard_gap * 1e6:.2f} um; pressure at the end {pressure[-1]:.4g} Pa")
     lines.append(f"span thickness {first_span * 1e6:.2f} um at the start, "
                  f"{float(span[-1]) * 1e6:.2f} um at the end; solid-fraction thickness "
                  f"{float(phi_thick[0]) * 1e6:.2f} -> {float(phi_thick[-1]) * 1e6:.2f} um")
