@@ -20,6 +20,10 @@
 
 namespace {
 
+// Set once the driver ends normally; until then a call of MPI_Finalize in a coupled run is an error
+// exit of LIGGGHTS (see MPI_Finalize below).
+bool g_normal_end = false;
+
 void print_help() {
   std::printf(
       "fiberdem %s: LIGGGHTS with the fiberform styles registered\n\n"
@@ -42,6 +46,25 @@ bool has_flag(int argc, char **argv, const char *a, const char *b = nullptr) {
 
 }  // namespace
 
+// LIGGGHTS ends an input or run error on all ranks (Error::all) with MPI_Finalize() and exit(1). In a
+// coupled MPMD run the partner program is still running, and MPI_Finalize then waits for it (Open
+// MPI's finalize synchronises the whole job) until the partner's own timeout aborts the job: an error
+// of the fibers' side took the coupling timeout to end both programs, and under load mpirun was seen
+// to hang in that state. This definition takes precedence over Open MPI's for libliggghts (the
+// executable's symbols come first; the MPI profiling interface PMPI_* reaches the library): in a
+// coupled run that has not ended normally it aborts the whole job at once, status kAbortStatus.
+extern "C" int MPI_Finalize() {
+  const auto &s = fiberform::coupling::session();
+  if (s.started && s.partner_size > 0 && !g_normal_end) {
+    std::fprintf(stderr, "fiberdem: coupling error: the fibers' side of the coupled run ended with an "
+                 "error (message above): aborting both programs (status %d)\n",
+                 fiberform::coupling::kAbortStatus);
+    std::fflush(stderr);
+    return PMPI_Abort(MPI_COMM_WORLD, fiberform::coupling::kAbortStatus);
+  }
+  return PMPI_Finalize();
+}
+
 int main(int argc, char **argv) {
   MPI_Init(&argc, &argv);
   // First collective on MPI_COMM_WORLD: split by MPI_APPNUM (a coupled MPMD run with
@@ -52,6 +75,7 @@ int main(int argc, char **argv) {
 
   if (has_flag(argc, argv, "-h", "--help") || has_flag(argc, argv, "-help")) {
     if (rank == 0) print_help();
+    g_normal_end = true;
     MPI_Finalize();
     return 0;
   }
@@ -79,6 +103,7 @@ int main(int argc, char **argv) {
     if (rank == 0)
       std::printf("fiberdem %s\nLIGGGHTS %s\n", FIBERFORM_VERSION, lmp->universe->version);
     delete lmp;
+    g_normal_end = true;
     MPI_Finalize();
     return 0;
   }
@@ -87,6 +112,7 @@ int main(int argc, char **argv) {
 
   lmp->input->file();
   delete lmp;
+  g_normal_end = true;
   MPI_Finalize();
   return 0;
 }
