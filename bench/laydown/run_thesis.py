@@ -42,7 +42,9 @@ import h5py
 import numpy as np
 import yaml
 
+from fiberform.campaign import use_fiber_contact
 from fiberform.provenance import atomic_write_text, machine_info
+from fiberform.sweep import set_field
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -52,24 +54,17 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "newton": {"laydown.fiber_contact": "newton"},
     "steric": {"laydown.fiber_contact": "newton", "laydown.terms": ["steric"], "contact.terms": ["steric"]},
 }
-SHARED_STAGES = ("fibers", "fabric", "flow")
-THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given  # stage folders a variant can take over
-
-
-def _set(data: dict[str, Any], path: str, value: Any) -> None:
-    node = data
-    keys = path.split(".")
-    for k in keys[:-1]:
-        node = node.setdefault(k, {})
-    node[keys[-1]] = value
+SHARED_STAGES = ("fibers", "fabric", "flow")  # stage folders a variant can take over
+THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given
 
 
 def scene_for(case: str, variant: str, ranks: int, seed: int, max_time: float | None, runs: Path) -> tuple[str, dict[str, Any]]:
     data = yaml.safe_load((THESIS / f"case-{case}.yaml").read_text())
     for path, value in VARIANTS[variant].items():
-        _set(data, path, value)
-    if data["laydown"].get("fiber_contact") == "newton":
-        data["contact"].pop("integrator", None)  # the sub-integrator belongs to the averaged contact
+        if path == "laydown.fiber_contact":
+            use_fiber_contact(data, value)
+        else:
+            set_field(data, path, value)
     name = f"{case}-{variant}-r{ranks}-s{seed}"
     data.update(name=f"bench_{name.replace('-', '_')}", seed=seed, output_dir=str(runs / name))
     data["laydown"]["ranks"] = ranks

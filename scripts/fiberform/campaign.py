@@ -32,7 +32,7 @@ from .errors import ConfigError
 from .scene import parse_scene, read_scene_yaml
 
 __all__ = ["Campaign", "Point", "Sheet", "load_campaign", "points", "point_scene", "read_experiments",
-           "summarise", "sheet_ratios"]
+           "summarise", "sheet_ratios", "use_fiber_contact"]
 
 Section = Literal["circular", "rectangular"]
 
@@ -161,6 +161,14 @@ def points(c: Campaign, sheets: list[Sheet]) -> list[Point]:
     return out
 
 
+def use_fiber_contact(data: dict[str, Any], mode: str) -> None:
+    """Set ``laydown.fiber_contact`` of plain scene data; with ``newton`` the contact section's
+    sub-integrator goes (it belongs to the averaged contact; the scene refuses it otherwise)."""
+    data["laydown"]["fiber_contact"] = mode
+    if mode == "newton" and isinstance(data.get("contact"), dict):
+        data["contact"].pop("integrator", None)
+
+
 def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, out_root: Path) -> dict[str, Any]:
     """The scene of ``point`` with ``section``: the case-A scene of the section with the mass, the
     placement slab and the flow box scaled (as the shipped case scenes scale them), output under
@@ -176,9 +184,7 @@ def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, o
     gen["placement_hi_m"][2] = float(f"{gen['placement_lo_m'][2] + slab:.6e}")
     data["flow"]["height_above_fabric_m"] = float(f"{slab + c.flow_margin_m:.6e}")
     if c.fiber_contact is not None and c.fiber_contact != data["laydown"].get("fiber_contact"):
-        data["laydown"]["fiber_contact"] = c.fiber_contact
-        if c.fiber_contact == "newton":
-            data["contact"].pop("integrator", None)  # the sub-integrator belongs to the averaged contact
+        use_fiber_contact(data, c.fiber_contact)
     p = c.press
     data["press"] = {"mode": "velocity", "target_thickness_m": float(f"{point.press_target_m:.6e}"),
                      "plate_speed_m_s": p.plate_speed_m_s, "hold_time_s": p.hold_time_s,
@@ -238,11 +244,10 @@ def sheet_ratios(c: Campaign, sheets: list[Sheet], pts: list[Point],
         row["direct"] = None if d is None else {"mean": d["mean"], "sd": d["sd"], "n": d["n"],
                                                 "ratio": d["mean"] / s.permeability_cfm}
         sem = None
-        if len(cases) >= 2 and cases[0][0] <= s.scaled_mass_kg <= cases[-1][0]:
+        # within the finished cases' mass range (ends widened by 1e-6 relative: a case at the
+        # sheet's own mass counts, also when it is the only one)
+        if cases and cases[0][0] * (1 - 1e-6) <= s.scaled_mass_kg <= cases[-1][0] * (1 + 1e-6):
             v = float(np.interp(s.scaled_mass_kg, [m for m, _ in cases], [x for _, x in cases]))
-            sem = {"mean": v, "ratio": v / s.permeability_cfm}
-        elif cases and any(math.isclose(m, s.scaled_mass_kg, rel_tol=1e-6) for m, _ in cases):
-            v = next(x for m, x in cases if math.isclose(m, s.scaled_mass_kg, rel_tol=1e-6))
             sem = {"mean": v, "ratio": v / s.permeability_cfm}
         row["sem"] = sem
         out.append(row)

@@ -34,7 +34,8 @@ from .provenance import atomic_write_text, file_hash, read_provenance
 from .scene import load_scene, parse_scene, read_scene_yaml
 from .stages import StageContext
 
-__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "submit_sweep", "write_sweep"]
+__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "set_field", "submit_sweep",
+           "write_sweep"]
 
 SWEEP_JSON, COLLECT_CSV, COLLECT_PNG = "sweep.json", "collect.csv", "collect.png"
 #: fields a sweep sets itself
@@ -74,7 +75,9 @@ def parse_set(text: str) -> tuple[str, list[Any]]:
     return path, out
 
 
-def _put(data: dict[str, Any], path: str, value: Any) -> None:
+def set_field(data: dict[str, Any], path: str, value: Any) -> None:
+    """Set the dotted scene field ``path`` (``laydown.ranks``) of plain scene data, creating missing
+    sections; ConfigError when a part of the path is not a section."""
     node = data
     keys = path.split(".")
     for k in keys[:-1]:
@@ -111,7 +114,7 @@ def expand(base_path: Path, sets: Sequence[tuple[str, list[Any]]], seeds: int,
         data = json.loads(json.dumps(raw))  # a deep copy of plain YAML data
         values = dict(zip(paths, combo[:-1], strict=True))
         for p, v in values.items():
-            _put(data, p, v)
+            set_field(data, p, v)
         name = f"{stem}_{k:03d}"
         data.update(name=name, seed=combo[-1], output_dir=str(sweep_dir / name))
         label = ", ".join(f"{p}={v!r}" for p, v in values.items()) or "base"
