@@ -30,7 +30,10 @@
    Iteration matrix S = beta' M + gamma' C_t + K_t (modified Newton: formed and factored at the
    first iteration of a step unless the caller's held one from earlier steps still serves (struct
    Tangent), again after every kRefresh iterations without convergence, and as soon as a
-   correction is not below kContraction times the previous one). K_t: the tangent of the
+   correction is not below kContraction times the previous one, or, when that is larger, below
+   kFreshSlack times the contraction the newest freshly formed tangent achieved, at most kSlowCap:
+   with secant terms (friction in slip) a new tangent contracts no better than a held one, and
+   forming one every iteration doubled the cost of a settled sheet). K_t: the tangent of the
    internal forces by forward differences of the exact discrete element forces (9 evaluations per
    element), multiplied by the right Jacobian of SO(3) at the current rotation increment (the
    tangent operator T(h dQ)); C_t: the gyroscopic, drag and damping tangents. S is block
@@ -258,6 +261,8 @@ class Stepper {
   static constexpr double kMaxStepTurn = 1.0;  // rad: largest rotation of a node in one step
   static constexpr int kRefresh = 4;           // iterations on one tangent before it is formed again
   static constexpr double kContraction = 0.25; // a correction larger than this x the previous one: new tangent
+  static constexpr double kFreshSlack = 1.25;  // ... or than this x what the newest fresh tangent achieved
+  static constexpr double kSlowCap = 0.9;      // (at most this)
   static constexpr int kMaxBacktracks = 12;    // halvings of one correction whose residual grew
   static constexpr double kReuseTurn = 0.1;    // rad: a node turned further since a held tangent: form anew
   static constexpr double kCosHalfReuseTurn = 0.99875026039496628;  // cos(kReuseTurn / 2)
@@ -576,6 +581,7 @@ class Stepper {
     bool slow = false;         // the last correction did not shrink fast enough: form a new tangent
     double prev_err = INFINITY;
     double last_rn = INFINITY;  // scaled residual norm at the last accepted iterate
+    double fresh_ratio = 0.0;   // contraction of the first correction on the newest tangent
     bool fresh = false;         // the last correction was solved with a tangent formed for it
     int backtracks = 0;
     for (int it = 0; it < opt.max_iter; ++it) {
@@ -768,7 +774,11 @@ class Stepper {
       set_positions(nodes, start, h);
       // the size of the full (undamped) correction measures convergence
       const double full = damp > 0.0 ? err / damp : err;
-      slow = !(full <= kContraction * prev_err);
+      // the contraction of the correction solved with a tangent formed for it: when forming anew
+      // does not contract better (a secant tangent, e.g. friction in slip), a held tangent that
+      // does about as well is kept instead of forming one every iteration
+      if (tangent && it > 0 && std::isfinite(prev_err) && prev_err > 0.0) fresh_ratio = full / prev_err;
+      slow = !(full <= std::max(kContraction, std::min(kSlowCap, kFreshSlack * fresh_ratio)) * prev_err);
       prev_err = full;
       fresh = tangent || (it == 0 && started_held_);  // a held tangent that passed the checks counts as new
       if (!(full <= opt.tol)) continue;
