@@ -18,9 +18,18 @@ Variants (``--variants``):
   thesis   the scene as shipped: fiber-fiber contact averaged + CVODE, vdw + es + steric (thesis sec. 2.4)
   newton   fiber-fiber contact inside each fiber's Newton solve (laydown.fiber_contact newton), same terms
   steric   newton, steric term only (a speed option: no colloidal terms)
+  loose    newton with laydown.newton_tolerance 1e-6 instead of 1e-8 (a speed option: fewer Newton
+           iterations; corrections below 1e-6 x the section radius, ~15 pm, end the iteration)
+
+Every row of a variant other than the reference (``--reference``, default newton) is compared with
+the reference row of the same case and seed that exists (either rank count; 1 and 2 ranks give the
+same sheet): sheet thickness, grammage, the grammage map on a 6 x 6 grid of the 3 x 3 mm piece
+(largest and RMS difference, relative to the mean) and the mass profile through the thickness in
+10 um slabs (largest difference, relative to the reference's largest slab).
 
     .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --variants thesis newton --ranks 2
     .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --max-time 2e-3   # a short probe
+    .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --variants loose --ranks 2
 
 Writes bench/laydown/results/thesis_laydown.json (rows appended per run; see docs/bench/laydown.md).
 """
@@ -53,7 +62,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "thesis": {},
     "newton": {"laydown.fiber_contact": "newton"},
     "steric": {"laydown.fiber_contact": "newton", "laydown.terms": ["steric"], "contact.terms": ["steric"]},
+    "loose": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6},
 }
+MAP_BINS = 6           # grammage map: bins per side of the fabric piece
+PROFILE_DZ = 10.0e-6   # solid-fraction profile: slab thickness (m)
 SHARED_STAGES = ("fibers", "fabric", "flow")  # stage folders a variant can take over
 THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given
 
@@ -125,7 +137,51 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
         "min_element_yarn_clearance_m": float(a["min_element_clearance_m"]),
         "fiber_contact": str(a.get("fiber_contact", "")),
     })
+    row["run_dir"] = str(out.relative_to(ROOT))
     return row
+
+
+def sheet_measures(run_dir: Path) -> dict[str, Any]:
+    """Grammage map (kg/m^2, MAP_BINS x MAP_BINS over the fabric piece) and mass profile over z
+    (kg/m^2 per slab of PROFILE_DZ, from 10 slabs below the fabric top) of a lay-down's final sheet;
+    each fiber's mass (fibers.h5) shared equally by its nodes."""
+    scene = yaml.safe_load((run_dir / "scene.yaml").read_text())
+    sx, sy = float(scene["fabric"]["size_x_m"]), float(scene["fabric"]["size_y_m"])
+    with h5py.File(run_dir / "fibers" / "fibers.h5", "r") as f:
+        fiber_mass = f["fibers/mass"][...]
+    with h5py.File(run_dir / "laydown" / "laydown.h5", "r") as h:
+        x = h["sheet/x"][...]
+        ids = h["sheet/fiber_id"][...]
+        offs = h["sheet/offsets"][...]
+        top = float(h["run"].attrs["fabric_top_m"])
+    counts = np.diff(offs)
+    m = np.repeat(fiber_mass[ids] / counts, counts)
+    gmap, _, _ = np.histogram2d(x[:, 0], x[:, 1], bins=[np.linspace(0.0, sx, MAP_BINS + 1),
+                                                      np.linspace(0.0, sy, MAP_BINS + 1)], weights=m)
+    zedges = np.arange(top - 10 * PROFILE_DZ, x[:, 2].max() + 2 * PROFILE_DZ, PROFILE_DZ)
+    prof, _ = np.histogram(x[:, 2], bins=zedges, weights=m)
+    return {"map": gmap / (sx * sy / MAP_BINS ** 2), "profile": prof / (sx * sy)}
+
+
+def compare(row: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
+    """The sheet of ``row`` against the reference row's (same case and seed)."""
+    a, b = sheet_measures(ROOT / row["run_dir"]), sheet_measures(ROOT / ref["run_dir"])
+    mean = float(np.mean(b["map"]))
+    dmap = a["map"] - b["map"]
+    size = max(len(a["profile"]), len(b["profile"]))
+    pa, pb = (np.pad(p, (0, size - len(p))) for p in (a["profile"], b["profile"]))
+    return {
+        "reference": f"{ref['variant']} r{ref['ranks']}",
+        "thickness_change_m": row["sheet_thickness_m"] - ref["sheet_thickness_m"],
+        "thickness_change_rel": row["sheet_thickness_m"] / ref["sheet_thickness_m"] - 1.0,
+        "grammage_change_rel": row["grammage_kg_m2"] / ref["grammage_kg_m2"] - 1.0,
+        "grammage_map_max_diff_rel": float(np.max(np.abs(dmap))) / mean,
+        "grammage_map_rms_diff_rel": float(np.sqrt(np.mean(dmap ** 2))) / mean,
+        "grammage_map_cv": float(np.std(a["map"]) / np.mean(a["map"])),
+        "grammage_map_cv_reference": float(np.std(b["map"]) / mean),
+        "profile_max_diff_rel": float(np.max(np.abs(pa - pb)) / np.max(pb)),
+        "wall_ratio": row["laydown_wall_s"] / ref["laydown_wall_s"],
+    }
 
 
 def main() -> int:
@@ -138,6 +194,8 @@ def main() -> int:
                     f"the thesis variant {THESIS_PROBE_S:g} s)")
     ap.add_argument("--runs", type=Path, default=Path("runs") / "bench-laydown")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "thesis_laydown.json")
+    ap.add_argument("--reference", default="newton", choices=sorted(VARIANTS),
+                    help="variant the others' sheets are compared with (default: newton)")
     args = ap.parse_args()
     for case in args.cases:
         if not (THESIS / f"case-{case}.yaml").is_file():
@@ -154,6 +212,11 @@ def main() -> int:
                 for ranks in args.ranks:
                     row = run_one(case, variant, ranks, seed, args.max_time, args.runs, build)
                     row["machine"] = machine_info()
+                    refs = [r for r in old + rows if r.get("case") == case and r.get("seed") == seed
+                            and r.get("variant") == args.reference and r.get("exit") == 0 and r.get("settled")
+                            and "run_dir" in r]
+                    if variant != args.reference and row.get("exit") == 0 and refs:
+                        row["versus_reference"] = compare(row, refs[-1])
                     rows.append(row)
                     print(json.dumps({k: v for k, v in row.items() if k != "machine"}), flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)

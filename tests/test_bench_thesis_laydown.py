@@ -1,0 +1,77 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The sheet measures of bench/laydown/run_thesis.py (grammage map, mass profile, comparison with a
+reference sheet) against hand-computed values of a two-fiber sheet."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bench() -> Any:
+    spec = importlib.util.spec_from_file_location("run_thesis", ROOT / "bench" / "laydown" / "run_thesis.py")
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["run_thesis"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def write_run(d: Path, shift_m: float = 0.0) -> None:
+    """Two fibers on a 3 x 3 mm piece (fabric top z = 2.0 mm): fiber 0 (3 nodes, 6 ug) in the
+    corner bin near the fabric top, fiber 2 (2 nodes, 4 ug; fiber 1 was removed) in the last bin,
+    15 um higher (+ shift_m)."""
+    (d / "fibers").mkdir(parents=True)
+    (d / "laydown").mkdir()
+    (d / "scene.yaml").write_text(yaml.safe_dump({"fabric": {"size_x_m": 3e-3, "size_y_m": 3e-3}}))
+    with h5py.File(d / "fibers" / "fibers.h5", "w") as f:
+        f["fibers/mass"] = np.array([6e-9, 1e-9, 4e-9])
+    x = np.array([[1e-4, 1e-4, 2.002e-3], [2e-4, 1e-4, 2.002e-3], [3e-4, 1e-4, 2.002e-3],
+                  [2.9e-3, 2.9e-3, 2.017e-3 + shift_m], [2.8e-3, 2.9e-3, 2.017e-3 + shift_m]])
+    with h5py.File(d / "laydown" / "laydown.h5", "w") as h:
+        h["sheet/x"] = x
+        h["sheet/fiber_id"] = np.array([0, 2])
+        h["sheet/offsets"] = np.array([0, 3, 5])
+        h.create_group("run").attrs["fabric_top_m"] = 2.0e-3
+
+
+def test_sheet_measures_hand_values(bench: Any, tmp_path: Path) -> None:
+    write_run(tmp_path)
+    m = bench.sheet_measures(tmp_path)
+    cell = (3e-3 / bench.MAP_BINS) ** 2
+    assert m["map"].shape == (bench.MAP_BINS, bench.MAP_BINS)
+    assert m["map"][0, 0] == pytest.approx(6e-9 / cell, rel=1e-12)
+    assert m["map"][-1, -1] == pytest.approx(4e-9 / cell, rel=1e-12)
+    assert m["map"].sum() * cell == pytest.approx(10e-9, rel=1e-12)  # the removed fiber not counted
+    # profile: slabs of 10 um from 100 um below the fabric top: fiber 0 in slab 10, fiber 2 in slab 11
+    prof = m["profile"]
+    area = 9e-6
+    assert prof[10] == pytest.approx(6e-9 / area, rel=1e-12)
+    assert prof[11] == pytest.approx(4e-9 / area, rel=1e-12)
+    assert prof.sum() == pytest.approx(10e-9 / area, rel=1e-12)
+
+
+def test_compare_with_reference(bench: Any, tmp_path: Path) -> None:
+    write_run(tmp_path / "ref")
+    write_run(tmp_path / "var", shift_m=10e-6)  # fiber 2 one slab higher
+    common = {"ranks": 2, "grammage_kg_m2": 1.0}
+    ref = {"variant": "newton", "run_dir": str(tmp_path / "ref"), "sheet_thickness_m": 20e-6,
+           "laydown_wall_s": 100.0, **common}
+    row = {"variant": "loose", "run_dir": str(tmp_path / "var"), "sheet_thickness_m": 30e-6,
+           "laydown_wall_s": 40.0, **common}
+    c = bench.compare(row, ref)
+    assert c["thickness_change_rel"] == pytest.approx(0.5)
+    assert c["wall_ratio"] == pytest.approx(0.4)
+    assert c["grammage_map_max_diff_rel"] == 0.0  # same bins
+    # the profile: 4 ug moved from slab 11 to slab 12; the reference's largest slab holds 6 ug
+    assert c["profile_max_diff_rel"] == pytest.approx(4.0 / 6.0, rel=1e-12)
