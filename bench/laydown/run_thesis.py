@@ -20,6 +20,11 @@ Variants (``--variants``):
   steric   newton, steric term only (a speed option: no colloidal terms)
   loose    newton with laydown.newton_tolerance 1e-6 instead of 1e-8 (a speed option: fewer Newton
            iterations; corrections below 1e-6 x the section radius, ~15 pm, end the iteration)
+  two_way, loose_two_way
+           newton / loose with coupling.mode two_way (issue 13): fiberPimpleFoam on one more process
+           next to the --ranks fiber ranks, the drag reaction exchanged every coupling.interval
+           steps; the row adds the drainage (superficial velocity through fabric + sheet) at the
+           start and the end (compare with --reference newton / loose)
 
 Every row of a variant other than the reference (``--reference``, default newton) is compared with
 the reference row of the same case and seed that exists (either rank count; 1 and 2 ranks give the
@@ -63,6 +68,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "newton": {"laydown.fiber_contact": "newton"},
     "steric": {"laydown.fiber_contact": "newton", "laydown.terms": ["steric"], "contact.terms": ["steric"]},
     "loose": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6},
+    "two_way": {"laydown.fiber_contact": "newton", "coupling.mode": "two_way"},
+    "loose_two_way": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
+                      "coupling.mode": "two_way"},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # solid-fraction profile: slab thickness (m)
@@ -125,6 +133,9 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
         a = dict(h["run"].attrs)
         nodes = int(h["sheet/x"].shape[0])
         ff = h["snapshots/min_fiber_fiber_gap"][...]
+        if "drainage" in h:
+            u = h["drainage/superficial_velocity"][...]
+            row.update({"drainage_start_m_s": float(u[0]), "drainage_end_m_s": float(u[-1])})
     steps, wall = int(a["steps"]), float(a["wall_time_s"])
     row.update({
         "nodes": nodes, "steps": steps, "settled": bool(a["settled"]),
