@@ -42,6 +42,8 @@ def write_run(d: Path, shift_m: float = 0.0) -> None:
         h["sheet/x"] = x
         h["sheet/fiber_id"] = np.array([0, 2])
         h["sheet/offsets"] = np.array([0, 3, 5])
+        h["snapshots/min_fiber_fiber_gap"] = np.array([1e-9])  # read by products.read_sheet
+        h["snapshots/min_element_clearance"] = np.array([1e-5])
         h.create_group("run").attrs["fabric_top_m"] = 2.0e-3
 
 

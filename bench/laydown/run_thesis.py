@@ -57,6 +57,7 @@ import numpy as np
 import yaml
 
 from fiberform.campaign import use_fiber_contact
+from fiberform.products import read_sheet
 from fiberform.provenance import atomic_write_text, machine_info
 from fiberform.sweep import set_field
 
@@ -73,7 +74,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
                       "coupling.mode": "two_way"},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
-PROFILE_DZ = 10.0e-6   # solid-fraction profile: slab thickness (m)
+PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
 SHARED_STAGES = ("fibers", "fabric", "flow")  # stage folders a variant can take over
 THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given
 
@@ -160,13 +161,12 @@ def sheet_measures(run_dir: Path) -> dict[str, Any]:
     sx, sy = float(scene["fabric"]["size_x_m"]), float(scene["fabric"]["size_y_m"])
     with h5py.File(run_dir / "fibers" / "fibers.h5", "r") as f:
         fiber_mass = f["fibers/mass"][...]
+    sheet = read_sheet(run_dir / "laydown" / "laydown.h5")
     with h5py.File(run_dir / "laydown" / "laydown.h5", "r") as h:
-        x = h["sheet/x"][...]
-        ids = h["sheet/fiber_id"][...]
-        offs = h["sheet/offsets"][...]
         top = float(h["run"].attrs["fabric_top_m"])
-    counts = np.diff(offs)
-    m = np.repeat(fiber_mass[ids] / counts, counts)
+    x = sheet.x
+    counts = np.diff(sheet.offsets)
+    m = np.repeat(fiber_mass[sheet.fiber_id] / counts, counts)
     gmap, _, _ = np.histogram2d(x[:, 0], x[:, 1], bins=[np.linspace(0.0, sx, MAP_BINS + 1),
                                                       np.linspace(0.0, sy, MAP_BINS + 1)], weights=m)
     zedges = np.arange(top - 10 * PROFILE_DZ, x[:, 2].max() + 2 * PROFILE_DZ, PROFILE_DZ)

@@ -581,7 +581,7 @@ class Stepper {
     bool slow = false;         // the last correction did not shrink fast enough: form a new tangent
     double prev_err = INFINITY;
     double last_rn = INFINITY;  // scaled residual norm at the last accepted iterate
-    double fresh_ratio = 0.0;   // contraction of the first correction on the newest tangent
+    double fresh_ratio = 0.0;   // contraction of the last correction solved with a tangent formed for it
     bool fresh = false;         // the last correction was solved with a tangent formed for it
     int backtracks = 0;
     for (int it = 0; it < opt.max_iter; ++it) {
