@@ -45,7 +45,6 @@ ALL_SECTIONS = (
 domain:
   lo_m: [-1.0e-3, -1.0e-3, 0.0]
   hi_m: [1.0e-3, 1.0e-3, 2.0e-3]
-  periodic: [x, y]
 fluid:
   density_kg_m3: 998.2
   viscosity_Pa_s: 1.0e-3

@@ -19,12 +19,16 @@ Writes bench/thesis/results/campaign[-reduced].json: the machine, per variant (p
 seed) the collected metrics and stage wall times with the ranks each stage ran on, per point the
 mean and sd over seeds, and per experimental sheet simulated / measured permeability in both mass
 conventions (docs/validation/table41.md). A variant that failed is listed with its error.
+Next to it (fiberform.campaign_report): campaign[-reduced]-fig412-thickness.png and
+campaign[-reduced]-fig413-permeability.png (thesis Figs. 4.12/4.13 redrawn) and campaign[-reduced].md
+(per-sheet tables); --collect-only redraws them from what has finished.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -35,6 +39,7 @@ from typing import Any
 import yaml
 
 from fiberform import campaign as cp
+from fiberform import campaign_report
 from fiberform.provenance import atomic_write_text, machine_info
 from fiberform.scene import load_scene
 
@@ -149,6 +154,8 @@ def main() -> int:
         "wall_s": time.monotonic() - t_start, "failures": failures, "variants": variants,
         "summary": summary, "sheets_unpressed": ratios, "sheets_pressed": ratios_pressed})
     print(f"wrote {out}")
+    for path in campaign_report.write_report(json.loads(out.read_text()), sheets, out):
+        print(f"wrote {path}")
     for group, stats in summary.items():
         line = ", ".join(f"{k} {v['mean']:.4g}" + (f" +- {v['sd']:.2g}" if v["n"] > 1 else "")
                          for k, v in stats.items())

@@ -32,7 +32,7 @@ from .errors import ConfigError
 from .scene import parse_scene, read_scene_yaml
 
 __all__ = ["Campaign", "Point", "Sheet", "load_campaign", "points", "point_scene", "read_experiments",
-           "summarise", "sheet_ratios", "use_fiber_contact"]
+           "sem_interp", "summarise", "sheet_ratios", "use_fiber_contact"]
 
 Section = Literal["circular", "rectangular"]
 
@@ -226,6 +226,16 @@ def summarise(collected: dict[str, list[dict[str, str]]]) -> dict[str, dict[str,
     return out
 
 
+def sem_interp(cases: list[tuple[float, float]], mass_kg: float) -> float | None:
+    """The SEM convention's value at an experimental scaled mass: ``cases`` (experimental mass,
+    value), sorted by mass, interpolated linearly; None without cases or outside their mass range
+    (ends widened by 1e-6 relative: a case at the sheet's own mass counts, also when it is the
+    only one)."""
+    if not cases or not cases[0][0] * (1 - 1e-6) <= mass_kg <= cases[-1][0] * (1 + 1e-6):
+        return None
+    return float(np.interp(mass_kg, [m for m, _ in cases], [x for _, x in cases]))
+
+
 def sheet_ratios(c: Campaign, sheets: list[Sheet], pts: list[Point],
                  summary: dict[str, dict[str, dict[str, float]]], section: Section,
                  metric: str = "permeability_cfm") -> list[dict[str, Any]]:
@@ -243,13 +253,8 @@ def sheet_ratios(c: Campaign, sheets: list[Sheet], pts: list[Point],
         d = summary.get(f"S{s.sheet}-{section}", {}).get(metric)
         row["direct"] = None if d is None else {"mean": d["mean"], "sd": d["sd"], "n": d["n"],
                                                 "ratio": d["mean"] / s.permeability_cfm}
-        sem = None
-        # within the finished cases' mass range (ends widened by 1e-6 relative: a case at the
-        # sheet's own mass counts, also when it is the only one)
-        if cases and cases[0][0] * (1 - 1e-6) <= s.scaled_mass_kg <= cases[-1][0] * (1 + 1e-6):
-            v = float(np.interp(s.scaled_mass_kg, [m for m, _ in cases], [x for _, x in cases]))
-            sem = {"mean": v, "ratio": v / s.permeability_cfm}
-        row["sem"] = sem
+        v = sem_interp(cases, s.scaled_mass_kg)
+        row["sem"] = None if v is None else {"mean": v, "ratio": v / s.permeability_cfm}
         out.append(row)
     return out
 

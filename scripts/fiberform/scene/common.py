@@ -19,9 +19,6 @@ class DomainSection(_Section):
     hi_m: list[Coordinate] = _element_range(
         "Upper corner of the box (x, y, z), above lo_m in every component", "m", "-10 <= x <= 10"
     )
-    periodic: list[Literal["x", "y", "z"]] = choice(
-        "Periodic directions", default=[]
-    )
 
     @model_validator(mode="after")
     def _check(self) -> DomainSection:
@@ -30,8 +27,6 @@ class DomainSection(_Section):
                 raise scene_problem(
                     f"hi_m[{axis}]", f"must be greater than lo_m[{axis}] = {lo!r}", hi
                 )
-        if len(set(self.periodic)) != len(self.periodic):
-            raise scene_problem("periodic", "directions must not repeat", self.periodic)
         return self
 
 

@@ -1,0 +1,264 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Figures and tables of the validation campaign (issue 15) from its results JSON.
+
+``bench/thesis/run.py`` writes ``campaign[-reduced].json`` (per point and section the mean and sd
+over seeds, per sheet the ratios of ``fiberform.campaign.sheet_ratios``); this module turns that
+dict and the experiments (``campaign.read_experiments``) into
+
+* the thesis' Figures 4.12 (sheet thickness, um) and 4.13 (air permeability at 125 Pa, CFM)
+  redrawn: against the injection mass (ug on 3 x 3 mm) and against the number of generated
+  fibers, the experiments (Table 4.1) against the simulation (circular and rectangular sections,
+  unpressed and pressed; error bars = sd over seeds), in both mass conventions: direct (points
+  S1..S7 at the sheets' own scaled masses) and SEM (case points A..G at their SEM-mapped masses).
+  On the fiber axis an experimental sheet sits at the fiber count of its simulated counterpart in
+  that convention and section (direct: point Sk; SEM: the case points interpolated at its mass);
+* a Markdown table per section and state (unpressed, pressed): per sheet the measured and the
+  simulated permeability and their ratio in both conventions, and the thicknesses.
+
+Points without data are left out (figures) or shown as ``-`` (tables); an empty campaign gives
+the experiments alone.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from .campaign import Sheet, sem_interp
+from .provenance import atomic_write_text, in_progress_path
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["QUANTITIES", "Series", "figure", "figure_series", "markdown", "write_figure", "write_report"]
+
+Convention = Literal["direct", "sem"]
+Axis = Literal["mass", "fibers"]
+State = Literal["unpressed", "pressed"]
+Summary = dict[str, dict[str, dict[str, float]]]
+Row = tuple[float, float, float, float, str]  # x, sd of x, y, sd of y, name
+
+SECTIONS = ("circular", "rectangular")
+STATES: tuple[State, ...] = ("unpressed", "pressed")
+CONVENTIONS: tuple[Convention, ...] = ("direct", "sem")
+AXES: tuple[Axis, ...] = ("mass", "fibers")
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """One compared quantity: the collect.csv metric per state, the Sheet field, the plot scale."""
+
+    metric: dict[State, str]
+    measured: str  # Sheet attribute
+    scale: float  # SI -> plotted unit
+    label: str
+    file_tag: str
+
+
+QUANTITIES = {
+    "thickness": Quantity({"unpressed": "sheet_thickness_m", "pressed": "pressed_span_thickness_m"},
+                          "thickness_m", 1e6, "sheet thickness (um)", "fig412-thickness"),
+    "permeability": Quantity({"unpressed": "permeability_cfm", "pressed": "permeability_press_cfm"},
+                             "permeability_cfm", 1.0, "air permeability at 125 Pa (CFM)", "fig413-permeability"),
+}
+
+
+@dataclass(frozen=True)
+class Series:
+    """One plotted line: experiments (section and state None; on the fiber axis with the section
+    whose fiber counts place them) or one section and state of the simulation."""
+
+    label: str
+    names: tuple[str, ...]  # point names (A, S3) or sheet numbers (1..7)
+    x: np.ndarray
+    y: np.ndarray
+    xerr: np.ndarray | None
+    yerr: np.ndarray | None
+    section: str | None = None
+    state: State | None = None
+
+
+def _group(point: str, section: str) -> str:
+    return f"{point}-{section}"  # bench/thesis/run.py's variant group
+
+
+def _is_sheet_point(name: str) -> bool:
+    return name.startswith("S") and name[1:].isdigit()  # campaign.points: sheets S1.., cases one letter
+
+
+def _points(data: dict[str, Any], convention: Convention) -> list[dict[str, Any]]:
+    """The JSON's points of a convention: direct the sheet points, SEM the case points."""
+    return [p for p in data.get("points", []) if _is_sheet_point(p["name"]) == (convention == "direct")]
+
+
+def _counterpart(data: dict[str, Any], sheet: Sheet, section: str, metric: str,
+                 convention: Convention) -> float | None:
+    """The simulated mean of ``metric`` that stands for ``sheet``: direct its own point, SEM the
+    case points interpolated at its mass (campaign.sem_interp)."""
+    summary: Summary = data.get("summary", {})
+    if convention == "direct":
+        st = summary.get(_group(f"S{sheet.sheet}", section), {}).get(metric)
+        return None if st is None else st["mean"]
+    cases = sorted((p["experimental_mass_kg"], summary[g][metric]["mean"]) for p in _points(data, "sem")
+                   if metric in summary.get(g := _group(p["name"], section), {}))
+    return sem_interp(cases, sheet.scaled_mass_kg)
+
+
+def _series(label: str, rows: list[Row], section: str | None,
+            state: State | None, errors: tuple[bool, bool]) -> Series:
+    rows = sorted(rows)
+    a = np.array([r[:4] for r in rows], dtype=float).reshape(-1, 4)
+    return Series(label, tuple(r[4] for r in rows), a[:, 0], a[:, 2], a[:, 1] if errors[0] else None,
+                  a[:, 3] if errors[1] else None, section, state)
+
+
+def figure_series(data: dict[str, Any], sheets: list[Sheet], quantity: str, convention: Convention,
+                  axis: Axis) -> list[Series]:
+    """The series of one panel (mass in ug, fibers as counts, thickness in um, permeability in
+    CFM; error bars the sd over seeds). Series without any point are left out."""
+    q = QUANTITIES[quantity]
+    summary: Summary = data.get("summary", {})
+    out: list[Series] = []
+    if axis == "mass":
+        out.append(_series("experiment (Table 4.1)",
+                           [(s.scaled_mass_kg * 1e9, 0.0, getattr(s, q.measured) * q.scale, 0.0, str(s.sheet))
+                            for s in sheets], None, None, (False, False)))
+    else:
+        for section in SECTIONS:
+            exp: list[Row] = [(n, 0.0, getattr(s, q.measured) * q.scale, 0.0, str(s.sheet)) for s in sheets
+                              if (n := _counterpart(data, s, section, "fibers", convention)) is not None]
+            out.append(_series(f"experiment at the {section} fiber count", exp, section, None, (False, False)))
+    for section in SECTIONS:
+        for state in STATES:
+            rows: list[Row] = []
+            for p in _points(data, convention):
+                st = summary.get(_group(p["name"], section), {})
+                if (v := st.get(q.metric[state])) is None:
+                    continue
+                if axis == "mass":
+                    x, xsd = p["experimental_mass_kg"] * 1e9, 0.0
+                elif "fibers" in st:
+                    x, xsd = st["fibers"]["mean"], st["fibers"]["sd"]
+                else:
+                    continue
+                rows.append((x, xsd, v["mean"] * q.scale, v["sd"] * q.scale, p["name"]))
+            out.append(_series(f"{section}, {state}", rows, section, state, (axis == "fibers", True)))
+    return [s for s in out if len(s.x)]
+
+
+_COLOURS: dict[str | None, str] = {"circular": "tab:blue", "rectangular": "tab:orange", None: "black"}
+_TITLES = {"direct": "direct: sheets' scaled masses (points S1-S7)",
+           "sem": "SEM mapping: cases A-G at their mapped masses"}
+_XLABELS = {"mass": "injection mass on 3 x 3 mm (ug)", "fibers": "number of fibers (generated)"}
+
+
+def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Figure, dict[tuple[str, str], list[Series]]]:
+    """Figure 4.12 (``thickness``) or 4.13 (``permeability``): rows the two mass conventions,
+    columns injection mass and number of fibers. Returns the figure and what each panel
+    (convention, axis) shows."""
+    import matplotlib.figure
+
+    q = QUANTITIES[quantity]
+    fig = matplotlib.figure.Figure(figsize=(11.0, 8.0))
+    axes = fig.subplots(len(CONVENTIONS), len(AXES), squeeze=False)
+    drawn: dict[tuple[str, str], list[Series]] = {}
+    for i, conv in enumerate(CONVENTIONS):
+        for j, axis in enumerate(AXES):
+            ax = axes[i][j]
+            drawn[(conv, axis)] = panel = figure_series(data, sheets, quantity, conv, axis)
+            for s in panel:
+                experiment = s.state is None
+                ax.errorbar(s.x, s.y, yerr=s.yerr, xerr=s.xerr, label=s.label, color=_COLOURS[s.section],
+                            marker="s" if experiment else ("o" if s.state == "unpressed" else "v"),
+                            mfc="none" if experiment and s.section else None,
+                            ls=":" if experiment and s.section else ("--" if s.state == "pressed" else "-"),
+                            capsize=3, lw=1.2)
+            if not panel:
+                ax.text(0.5, 0.5, "no simulated points yet", transform=ax.transAxes, ha="center", color="grey")
+            ax.set_xlabel(_XLABELS[axis])
+            ax.set_ylabel(q.label)
+            ax.set_title(_TITLES[conv], fontsize=9)
+            ax.grid(alpha=0.3)
+            if panel:
+                ax.legend(fontsize=7)
+    fig.suptitle(f"{q.label}: experiment vs simulation (error bars: sd over seeds)", fontsize=11)
+    fig.tight_layout()
+    return fig, drawn
+
+
+def write_figure(data: dict[str, Any], sheets: list[Sheet], quantity: str,
+                 out: Path) -> dict[tuple[str, str], list[Series]]:
+    """figure() saved as PNG to ``out`` (through a temporary name in the same folder)."""
+    fig, drawn = figure(data, sheets, quantity)
+    tmp = in_progress_path(out)
+    try:
+        fig.savefig(tmp, format="png", dpi=110)
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return drawn
+
+
+def _num(v: float | None, digits: int) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def _stat(st: dict[str, float] | None, scale: float = 1.0) -> str:
+    if st is None:
+        return "-"
+    return f"{st['mean'] * scale:.1f} +- {st['sd'] * scale:.1f} (n={int(st['n'])})"
+
+
+def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
+    """Per section and state one table: per sheet the measured permeability, the simulated one and
+    simulated / measured in the direct and the SEM convention (the JSON's ``sheets_unpressed`` /
+    ``sheets_pressed``), the measured and simulated thickness; ``-`` where not available."""
+    summary: Summary = data.get("summary", {})
+    sections = list(data.get("sheets_unpressed") or SECTIONS)
+    lines = ["# Validation campaign: experimental sheets against the simulation", "",
+             f"From `bench/thesis/run.py {data.get('command', '')}` (seeds: {data.get('seeds', '-')}). Permeability in CFM "
+             "(cubic feet per square foot per minute) at 125 Pa, thickness in um, masses in ug on 3 x 3 mm. "
+             "Simulated values: mean +- sd over seeds (n seeds). direct: sheet k against point Sk (its own "
+             "scaled mass); SEM: the case points interpolated linearly at the sheet's mass (case B = sheet 2). "
+             "Ratio: simulated / measured permeability. Simulated thickness: the 5-95 % span of node heights "
+             "+ one fiber width (pressed: at the end of the press).", ""]
+    if data.get("failures"):
+        lines += ["Failed: " + "; ".join(f"{g}: {e}" for g, e in data["failures"].items()), ""]
+    for section in sections:
+        for state in STATES:
+            rows = {r["sheet"]: r for r in data.get(f"sheets_{state}", {}).get(section, [])}
+            thick = QUANTITIES["thickness"].metric[state]
+            lines += [f"## {section}, {state}", "",
+                      "| sheet | mass (ug) | measured (CFM) | direct: simulated (CFM) | direct: ratio | "
+                      "SEM: simulated (CFM) | SEM: ratio | measured thickness (um) | direct: thickness (um) | "
+                      "SEM: thickness (um) |", "|" + "---|" * 10]
+            for s in sheets:
+                r = rows.get(s.sheet, {})
+                d, sem = r.get("direct"), r.get("sem")
+                sem_t = _counterpart(data, s, section, thick, "sem")
+                cells = [str(s.sheet), f"{s.scaled_mass_kg * 1e9:.1f}", f"{s.permeability_cfm:g}", _stat(d),
+                         _num(d and d["ratio"], 2), _num(sem and sem["mean"], 1), _num(sem and sem["ratio"], 2),
+                         f"{s.thickness_m * 1e6:g}",
+                         _stat(summary.get(_group(f"S{s.sheet}", section), {}).get(thick), 1e6),
+                         _num(None if sem_t is None else sem_t * 1e6, 1)]
+                lines.append("| " + " | ".join(cells) + " |")
+            lines.append("")
+    return "\n".join(lines)
+
+
+def write_report(data: dict[str, Any], sheets: list[Sheet], json_path: Path) -> list[Path]:
+    """Next to ``campaign[-reduced].json``: ``<stem>-fig412-thickness.png``,
+    ``<stem>-fig413-permeability.png`` and ``<stem>.md``. Returns the paths written."""
+    out = []
+    for name, q in QUANTITIES.items():
+        png = json_path.with_name(f"{json_path.stem}-{q.file_tag}.png")
+        write_figure(data, sheets, name, png)
+        out.append(png)
+    md = json_path.with_suffix(".md")
+    atomic_write_text(md, markdown(data, sheets))
+    return out + [md]
+

@@ -1,0 +1,219 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""fiberform.campaign_report (issue 15): the campaign JSON turned into the thesis' Figures
+4.12/4.13 and per-sheet Markdown tables, checked against hand values (no simulation):
+
+- the table shows the JSON's simulated permeability (mean +- sd, n) and ratios (620 / 310 CFM ->
+  2.00), the thicknesses, and ``-`` where a sheet, a state or a section has no data;
+- run through the runner's own functions (summarise, sheet_ratios) the table gives the hand ratios
+  of both conventions;
+- the figures plot exactly the hand values at the right masses / fiber counts, error bars = sd
+  (read back from the drawn Axes), and the PNG files are written (also for an empty campaign,
+  which then shows the experiments alone).
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from matplotlib.container import ErrorbarContainer
+
+from fiberform import campaign as cp
+from fiberform import campaign_report as cr
+
+ROOT = Path(__file__).resolve().parents[1]
+THESIS = ROOT / "scenes" / "thesis"
+SHEETS = cp.read_experiments(THESIS / "experiments.csv")
+F = 27.1 / 89.25  # SEM: experimental mass per simulated mass (case B = sheet 2)
+
+
+def _st(mean: float, sd: float, n: int) -> dict[str, float]:
+    return {"mean": mean, "sd": sd, "n": float(n)}
+
+
+#: a hand-made campaign: circular points S1, S2, A, C; rectangular S1 with a permeability only
+DATA: dict[str, Any] = {
+    "command": "--collect-only", "seeds": 3, "failures": {},
+    "points": [{"name": "A", "mass_kg": 35.7e-9, "experimental_mass_kg": 35.7e-9 * F, "press_target_m": 2e-6},
+               {"name": "C", "mass_kg": 178.5e-9, "experimental_mass_kg": 178.5e-9 * F, "press_target_m": 87.6e-6},
+               {"name": "S1", "mass_kg": 13.5e-9, "experimental_mass_kg": 13.5e-9, "press_target_m": 2e-6},
+               {"name": "S2", "mass_kg": 27.1e-9, "experimental_mass_kg": 27.1e-9, "press_target_m": 10e-6}],
+    "summary": {
+        "S1-circular": {"fibers": _st(20, 1, 3), "permeability_cfm": _st(620, 10, 3),
+                        "sheet_thickness_m": _st(250e-6, 20e-6, 3), "permeability_press_cfm": _st(600, 5, 2),
+                        "pressed_span_thickness_m": _st(100e-6, 0, 2)},
+        "S2-circular": {"fibers": _st(40, 0, 1), "permeability_cfm": _st(510, 0, 1)},
+        "A-circular": {"fibers": _st(58, 1, 2), "permeability_cfm": _st(700, 14, 2),
+                       "sheet_thickness_m": _st(244.6e-6, 36.8e-6, 2)},
+        "C-circular": {"fibers": _st(290, 0, 1), "permeability_cfm": _st(500, 0, 1),
+                       "sheet_thickness_m": _st(300e-6, 0, 1)},
+        "S1-rectangular": {"permeability_cfm": _st(400, 8, 2)},
+    },
+    "sheets_unpressed": {
+        "circular": [{"sheet": 1, "measured_cfm": 310.0, "measured_thickness_m": 0.0,
+                      "direct": {"mean": 620.0, "sd": 10.0, "n": 3.0, "ratio": 2.0},
+                      "sem": {"mean": 651.0, "ratio": 2.1}},
+                     {"sheet": 2, "measured_cfm": 255.0, "measured_thickness_m": 10e-6,
+                      "direct": {"mean": 510.0, "sd": 0.0, "n": 1.0, "ratio": 2.0}, "sem": None},
+                     {"sheet": 4, "measured_cfm": 105.0, "measured_thickness_m": 93e-6, "direct": None, "sem": None}],
+        "rectangular": [{"sheet": 1, "measured_cfm": 310.0, "measured_thickness_m": 0.0,
+                         "direct": {"mean": 400.0, "sd": 8.0, "n": 2.0, "ratio": 400 / 310}, "sem": None}],
+    },
+    "sheets_pressed": {
+        "circular": [{"sheet": 1, "measured_cfm": 310.0, "measured_thickness_m": 0.0,
+                      "direct": {"mean": 600.0, "sd": 5.0, "n": 2.0, "ratio": 600 / 310}, "sem": None}],
+        "rectangular": [],
+    },
+}
+
+
+def _table(md: str, title: str) -> dict[str, list[str]]:
+    """The rows of the table under ``## title``, by sheet number: the cells after the first."""
+    lines = md.splitlines()
+    i = lines.index(f"## {title}")
+    rows: dict[str, list[str]] = {}
+    for line in lines[i + 4:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        rows[cells[0]] = cells[1:]
+    return rows
+
+
+def test_table_shows_the_json_values_and_dashes() -> None:
+    md = cr.markdown(DATA, SHEETS)
+    t = _table(md, "circular, unpressed")
+    assert list(t) == [str(k) for k in range(1, 8)]
+    # mass, measured CFM, direct sim, ratio, SEM sim, ratio, measured / direct / SEM thickness
+    a = (13.5 - 35.7 * F) / (178.5 * F - 35.7 * F)  # sheet 1 between cases A and C
+    assert t["1"] == ["13.5", "310", "620.0 +- 10.0 (n=3)", "2.00", "651.0", "2.10", "0",
+                      "250.0 +- 20.0 (n=3)", f"{244.6 + a * (300.0 - 244.6):.1f}"]
+    assert t["1"][-1] == "248.0"  # by hand: 244.6 + 2.66 / 43.36 x 55.4
+    assert t["2"][:7] == ["27.1", "255", "510.0 +- 0.0 (n=1)", "2.00", "-", "-", "10"]
+    assert t["2"][7] == "-"  # S2 has no thickness
+    assert t["4"] == ["62.9", "105", "-", "-", "-", "-", "93", "-", "-"]  # beyond case C
+    p = _table(md, "circular, pressed")
+    assert p["1"][2:5] == ["600.0 +- 5.0 (n=2)", "1.94", "-"] and p["1"][7] == "100.0 +- 0.0 (n=2)"
+    assert p["3"][2:] == ["-"] * 4 + ["82", "-", "-"]  # no pressed case points: no SEM thickness either
+    r = _table(md, "rectangular, unpressed")
+    assert r["1"][2:4] == ["400.0 +- 8.0 (n=2)", "1.29"]
+    assert all(r[k][2:6] == ["-"] * 4 for k in "234567")
+    assert all(row[2:6] == ["-"] * 4 for row in _table(md, "rectangular, pressed").values())
+
+
+def test_table_through_the_runner_functions() -> None:
+    """The JSON as run.py builds it (cp.summarise, cp.sheet_ratios) from collect rows: 600 and
+    640 CFM for S1 give 620 +- 28.3 and ratio 2.00; SEM at 13.5 ug between A (700 CFM, 10.84
+    ug) and C (500 CFM, 54.2 ug): 700 - 200 x 2.66 / 43.36 = 687.7 CFM, ratio 2.22."""
+    c = cp.load_campaign(THESIS / "campaign.yaml")
+    pts = cp.points(c, SHEETS)
+    summary = cp.summarise({"S1-circular": [{"permeability_cfm": "600"}, {"permeability_cfm": "640"}],
+                            "A-circular": [{"permeability_cfm": "700"}], "C-circular": [{"permeability_cfm": "500"}]})
+    data = {"points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg}
+                       for p in pts], "summary": summary,
+            "sheets_unpressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular")},
+            "sheets_pressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular", "permeability_press_cfm")}}
+    t = _table(cr.markdown(data, SHEETS), "circular, unpressed")
+    assert t["1"][2:6] == ["620.0 +- 28.3 (n=2)", "2.00", "687.7", "2.22"]
+    assert t["3"][2:6] == ["-", "-", "542.0", "3.10"]  # 700 - 200 x 34.26 / 43.36 = 542.0; / 175
+    assert t["4"][4:6] == ["-", "-"]  # 62.9 ug: beyond case C
+
+
+def _container(ax: Any, label: str) -> ErrorbarContainer:
+    (c,) = [c for c in ax.containers if isinstance(c, ErrorbarContainer) and c.get_label() == label]
+    return c
+
+
+def _drawn(c: ErrorbarContainer) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """x, y and the half-lengths of the x and y error bars as drawn."""
+    xy = np.asarray(c.lines[0].get_xydata())
+    bars = list(c.lines[2])
+    yerr = xerr = None
+    if c.has_yerr:  # matplotlib draws the x bars first, then the y bars
+        seg = np.array(bars.pop().get_segments())
+        assert np.allclose(seg[:, 0, 0], seg[:, 1, 0])
+        yerr = (seg[:, 1, 1] - seg[:, 0, 1]) / 2
+        assert np.allclose((seg[:, 1, 1] + seg[:, 0, 1]) / 2, xy[:, 1])
+    if c.has_xerr:
+        seg = np.array(bars.pop().get_segments())
+        xerr = (seg[:, 1, 0] - seg[:, 0, 0]) / 2
+    return xy[:, 0], xy[:, 1], xerr, yerr
+
+
+def test_permeability_figure_plots_the_hand_values() -> None:
+    fig, drawn = cr.figure(DATA, SHEETS, "permeability")
+    axes = fig.axes  # rows: direct, SEM; columns: mass, fibers
+    # direct, mass: the experiments at their scaled masses; S1, S2 at theirs, error bars = sd
+    exp = drawn[("direct", "mass")][0]
+    assert exp.label == "experiment (Table 4.1)" and exp.yerr is None
+    assert exp.x.tolist() == pytest.approx([13.5, 27.1, 45.1, 62.9, 90.0, 134.7, 179.4])
+    assert exp.y.tolist() == [310, 255, 175, 105, 58, 17, 5]
+    x, y, xerr, yerr = _drawn(_container(axes[0], "circular, unpressed"))
+    assert x.tolist() == pytest.approx([13.5, 27.1]) and y.tolist() == [620, 510]
+    assert xerr is None and yerr is not None and yerr.tolist() == pytest.approx([10, 0])
+    x, y, _, yerr = _drawn(_container(axes[0], "circular, pressed"))
+    assert (x.tolist(), y.tolist(), yerr.tolist()) == (pytest.approx([13.5]), [600], pytest.approx([5]))  # type: ignore[union-attr]
+    x, y, _, yerr = _drawn(_container(axes[0], "rectangular, unpressed"))
+    assert (x.tolist(), y.tolist(), yerr.tolist()) == (pytest.approx([13.5]), [400], pytest.approx([8]))  # type: ignore[union-attr]
+    assert {s.label for s in drawn[("direct", "mass")]} == {"experiment (Table 4.1)", "circular, unpressed",
+                                                            "circular, pressed", "rectangular, unpressed"}
+    # SEM, mass: cases A, C at their mapped masses (10.84, 54.2 ug); sheet points not shown
+    x, y, _, yerr = _drawn(_container(axes[2], "circular, unpressed"))
+    assert x.tolist() == pytest.approx([10.84, 54.2], rel=1e-4) and y.tolist() == [700, 500]
+    assert yerr.tolist() == pytest.approx([14, 0])  # type: ignore[union-attr]
+    # direct, fibers: S1, S2 at their fiber counts (x error bars = sd); the sheets at the same counts
+    x, y, xerr, yerr = _drawn(_container(axes[1], "circular, unpressed"))
+    assert x.tolist() == [20, 40] and xerr.tolist() == pytest.approx([1, 0]) and yerr.tolist() == pytest.approx([10, 0])  # type: ignore[union-attr]
+    x, y, _, _ = _drawn(_container(axes[1], "experiment at the circular fiber count"))
+    assert x.tolist() == [20, 40] and y.tolist() == [310, 255]
+    # rectangular S1 has no fiber count: absent from the fiber panels
+    assert not any(s.section == "rectangular" for s in drawn[("direct", "fibers")])
+    # SEM, fibers: the sheets within A..C at the cases' fiber counts interpolated at their masses
+    sem_exp = next(s for s in drawn[("sem", "fibers")] if s.label == "experiment at the circular fiber count")
+    assert sem_exp.names == ("1", "2", "3")
+    assert sem_exp.x.tolist() == pytest.approx([58 + 232 * 2.66 / 43.36, 58 + 232 * 16.26 / 43.36,
+                                                58 + 232 * 34.26 / 43.36], rel=1e-4)
+    assert sem_exp.y.tolist() == [310, 255, 175]
+
+
+def test_thickness_figure_in_um() -> None:
+    fig, drawn = cr.figure(DATA, SHEETS, "thickness")
+    exp = drawn[("direct", "mass")][0]
+    assert exp.y.tolist() == pytest.approx([0, 10, 82, 93, 97, 141, 149])
+    x, y, _, yerr = _drawn(_container(fig.axes[0], "circular, unpressed"))
+    assert x.tolist() == pytest.approx([13.5]) and y.tolist() == pytest.approx([250]) and yerr.tolist() == pytest.approx([20])  # type: ignore[union-attr]
+    x, y, _, yerr = _drawn(_container(fig.axes[2], "circular, unpressed"))
+    assert y.tolist() == pytest.approx([244.6, 300]) and yerr.tolist() == pytest.approx([36.8, 0])  # type: ignore[union-attr]
+    assert not any(s.section == "rectangular" for s in drawn[("direct", "mass")])
+
+
+def test_empty_campaign_gives_the_experiments_alone(tmp_path: Path) -> None:
+    for data in ({}, {**copy.deepcopy(DATA), "summary": {}, "sheets_unpressed": {}, "sheets_pressed": {}}):
+        for q in cr.QUANTITIES:
+            fig, drawn = cr.figure(data, SHEETS, q)
+            assert [s.label for s in drawn[("direct", "mass")]] == ["experiment (Table 4.1)"]
+            assert [s.label for s in drawn[("sem", "mass")]] == ["experiment (Table 4.1)"]
+            assert drawn[("direct", "fibers")] == [] == drawn[("sem", "fibers")]
+        md = cr.markdown(data, SHEETS)
+        for title in ("circular, unpressed", "rectangular, pressed"):
+            t = _table(md, title)
+            assert t["5"] == ["90.0", "58", "-", "-", "-", "-", "97", "-", "-"]
+    written = cr.write_report({}, SHEETS, tmp_path / "campaign.json")
+    assert [p.name for p in written] == ["campaign-fig412-thickness.png", "campaign-fig413-permeability.png",
+                                         "campaign.md"]
+
+
+def test_write_report_writes_the_files(tmp_path: Path) -> None:
+    out = tmp_path / "results" / "campaign-reduced.json"
+    out.parent.mkdir()
+    written = cr.write_report(DATA, SHEETS, out)
+    png = [p for p in written if p.suffix == ".png"]
+    assert len(png) == 2
+    for p in png:
+        head = p.read_bytes()[:8]
+        assert head == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 10_000
+    assert (out.with_suffix(".md")).read_text() == cr.markdown(DATA, SHEETS)
+    assert sorted(p.name for p in out.parent.iterdir()) == sorted(p.name for p in written)  # no temporaries left
