@@ -7,7 +7,12 @@ their scenes and the per-sheet ratios, against the thesis' numbers and hand valu
 - the SEM mapping is the thesis' (case B = sheet 2, linear) and G is sheet 7's counterpart;
 - press targets: a sheet's own measured thickness, a case's the thickness at its mapped mass;
 - every point scene of both sections is valid and presses with the overlap guard's stop;
-- statistics over seeds and ratios from hand-made collect rows.
+- the second press (pressure_press, 410 kPa, ISO 5269-1): its fields are checked (exit 2 naming
+  the field); its scene equals the point's in every section but press (so every stage before the
+  press hashes the same inputs) and presses in pressure mode with the same guard;
+- statistics over seeds and ratios from hand-made collect rows, the pressure press's rows joined
+  by seed (and refused when they are not the same sheet);
+- end to end on a tiny campaign: both presses of one laid-down sheet, the lay-down not run twice.
 """
 
 from __future__ import annotations
@@ -17,11 +22,14 @@ import statistics
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from fiberform import campaign as cp
-from fiberform.scene import parse_scene, read_scene_yaml
+from fiberform import executors
+from fiberform.scene import parse_scene, read_scene_yaml, section_hash
+from fiberform.stages import STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS = ROOT / "scenes" / "thesis"
@@ -130,6 +138,97 @@ def test_campaign_file_errors_name_the_field(tmp_path: Path) -> None:
         cp.load_campaign(bad)
 
 
+@pytest.mark.parametrize("field, value", [("target_pressure_Pa", "0.0"), ("target_pressure_Pa", "2.0e+9"),
+                                          ("hold_time_s", "-1.0e-3"), ("release_time_s", "11.0"),
+                                          ("pressure_rate_Pa_s", "0.0"), ("plate_force_N", "1.0")])
+def test_pressure_press_errors_name_the_field(tmp_path: Path, field: str, value: str) -> None:
+    head, sep, block = (THESIS / "campaign.yaml").read_text().partition("\npressure_press:\n")
+    assert sep and block.startswith("  target_pressure_Pa: 4.1e+5")
+    block, blank, tail = block.partition("\n\n")
+    lines = [line for line in block.splitlines() if not line.startswith(f"  {field}:")]  # the shipped value
+    bad = tmp_path / "campaign.yaml"
+    text = head + sep + "\n".join([f"  {field}: {value}", *lines]) + blank + tail
+    bad.write_text(text)
+    with pytest.raises(cp.ConfigError, match=f"pressure_press.{field}"):
+        cp.load_campaign(bad)
+    # the runner: exit 2 naming the field, before anything is run or written
+    proc = subprocess.run([sys.executable, str(RUNNER), "--campaign", str(bad), "--runs", "runs/c",
+                           "--collect-only", "--out", str(tmp_path / "r.json")], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and f"pressure_press.{field}" in proc.stderr, proc.stderr[-2000:]
+    assert not (tmp_path / "r.json").exists() and not (tmp_path / "runs").exists()
+
+
+def test_pressure_press_is_iso_5269(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    c, _, _ = setup
+    assert c.pressure_press is not None
+    assert c.pressure_press.target_pressure_Pa == 410e3  # ISO 5269-1 wet pressing (an assumption)
+    text = (THESIS / "campaign.yaml").read_text()
+    assert "ISO 5269-1" in text and "ASSUMPTION, not a thesis value" in text
+    # the campaign without it has no second press
+    assert cp.Campaign.model_validate({**c.model_dump(), "pressure_press": None}).pressure_press is None
+
+
+def test_pressure_scene_differs_from_the_point_only_in_press(
+        setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    c, _, pts = setup
+    assert c.pressure_press is not None
+    upstream = [STAGES[n] for n in cp.REUSED_STAGES]
+    for p in pts:
+        for section in c.sections:
+            point = cp.point_scene(c, p, section, THESIS, Path("runs/x"))
+            data = cp.pressure_scene(c, point)
+            a, b = dict(point), dict(data)
+            pa, pb = a.pop("press"), b.pop("press")
+            assert b.pop("name") == a.pop("name") + "_pressure"
+            assert b.pop("output_dir") == a.pop("output_dir") + "-pressure"
+            assert a == b
+            assert pb == {"mode": "pressure", "target_pressure_Pa": 410e3,
+                          "hold_time_s": c.pressure_press.hold_time_s,
+                          "release_time_s": c.pressure_press.release_time_s,
+                          "plate_speed_m_s": pa["plate_speed_m_s"], "output_interval_s": pa["output_interval_s"],
+                          "overlap_limit": pa["overlap_limit"], "overlap_action": "stop", "ranks": pa["ranks"]}
+            # validated, and every stage before the press hashes the same scene entries
+            sp, sq = parse_scene(point, "point"), parse_scene(data, "pressure")
+            assert sq.press is not None and sq.press.mode == "pressure" and sq.press.overlap_action == "stop"
+            for st in upstream:
+                assert section_hash(sp, st.uses) == section_hash(sq, st.uses), st.name
+            assert section_hash(sp, STAGES["press"].uses) != section_hash(sq, STAGES["press"].uses)
+    with pytest.raises(cp.ConfigError, match="pressure_press"):
+        cp.pressure_scene(c.model_copy(update={"pressure_press": None}), point)
+    # an optional loading rate reaches the scene
+    c2 = c.model_copy(update={"pressure_press": c.pressure_press.model_copy(update={"pressure_rate_Pa_s": 1e8})})
+    assert cp.pressure_scene(c2, point)["press"]["pressure_rate_Pa_s"] == 1e8
+
+
+def test_pressure_rows_join_by_seed(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    """The pressure press's collect rows join the point's by seed as pressure_<column>; a row of
+    another sheet (a differing lay-down column) is refused; statistics and ratios follow."""
+    c, sheets, pts = setup
+    sheet = {"fibers": "40", "sheet_thickness_m": "2.5e-04", "permeability_cfm": "600", "laydown_wall_s": "90.5"}
+    point = [{"seed": "1", **sheet, "permeability_press_cfm": "550", "press_wall_s": "10"},
+             {"seed": "2", **sheet, "permeability_press_cfm": "530"},
+             {"seed": "3", **sheet}]
+    pressure = [{"seed": "2", **sheet, "permeability_press_cfm": "400", "pressed_span_thickness_m": "5e-05",
+                 "press_max_pressure_Pa": "12.5", "permeability-press_wall_s": "20"},
+                {"seed": "1", **sheet, "permeability_press_cfm": "420", "pressed_span_thickness_m": "7e-05"},
+                {"seed": "3", **{**sheet, "laydown_wall_s": "91.0"}, "permeability_press_cfm": "1"}]
+    rows, problems = cp.merge_pressure(point, pressure)
+    assert rows[0]["pressure_permeability_press_cfm"] == "420" and rows[0]["permeability_press_cfm"] == "550"
+    assert rows[1]["pressure_press_max_pressure_Pa"] == "12.5" and rows[1]["pressure_permeability-press_wall_s"] == "20"
+    assert rows[0]["press_wall_s"] == "10" and "pressure_press_wall_s" not in rows[0]
+    assert not any(k.startswith("pressure_") for k in rows[2])  # seed 3: another lay-down
+    assert len(problems) == 1 and "seed 3" in problems[0] and "laydown_wall_s" in problems[0]
+    assert cp.merge_pressure(point, []) == (point, [])
+    s = cp.summarise({"S2-circular": rows})
+    assert s["S2-circular"]["pressure_permeability_press_cfm"] == {"mean": 410.0, "sd": statistics.stdev([420, 400]),
+                                                                  "n": 2.0}
+    assert s["S2-circular"]["pressure_pressed_span_thickness_m"]["mean"] == pytest.approx(6e-5)
+    assert s["S2-circular"]["permeability_press_cfm"]["mean"] == 540.0
+    r = {x["sheet"]: x for x in cp.sheet_ratios(c, sheets, pts, s, "circular", "pressure_permeability_press_cfm")}
+    assert r[2]["direct"]["ratio"] == pytest.approx(410.0 / 255.0)
+
+
 # ---- the runner end to end on a tiny campaign (1 x 1 mm, a few fibers): every stage through the
 # sweep machinery, the results JSON, and the resume (a second call runs nothing again)
 TINY_BASE = """\
@@ -161,6 +260,7 @@ sheets: [2]
 sem_mapping: {case: B, sheet: 2}
 press: {plate_speed_m_s: 0.02, min_target_m: 2.0e-6, hold_time_s: 2.0e-4, output_interval_s: 1.0e-4,
         overlap_limit: 0.2}
+pressure_press: {target_pressure_Pa: 4.1e+5, hold_time_s: 2.0e-4, release_time_s: 1.0e-4}
 reduced: {points: [A], seeds: 1}
 """
 TINY_EXPERIMENTS = """\
@@ -171,10 +271,24 @@ sheet,injection_mass_g,permeability_cfm,thickness_um,scaled_injection_mass_ug
 """
 
 
+def tiny_point(root: Path) -> tuple[cp.Campaign, dict[str, Any]]:
+    """The tiny campaign written to ``root/camp`` and the scene data of its first point (circular,
+    output under the relative folder runs/)."""
+    camp = root / "camp"
+    camp.mkdir()
+    (camp / "base.yaml").write_text(TINY_BASE)
+    (camp / "campaign.yaml").write_text(TINY_CAMPAIGN)
+    (camp / "experiments.csv").write_text(TINY_EXPERIMENTS)
+    c = cp.load_campaign(camp / "campaign.yaml")
+    point = cp.point_scene(c, cp.points(c, cp.read_experiments(camp / "experiments.csv"))[0], "circular", camp,
+                           Path("runs"))
+    return c, point
+
+
 @pytest.mark.system
 def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path) -> None:
     if not (build_dir / "bin" / "fiberdem").is_file():
-        pytest.skip("fiberdem not built")
+        pytest.fail(f"fiberdem not built in {build_dir}")
     camp = tmp_path / "camp"
     camp.mkdir()
     (camp / "base.yaml").write_text(TINY_BASE)
@@ -202,10 +316,24 @@ def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path
     assert stats["permeability_cfm"]["mean"] == pytest.approx(float(v["permeability_cfm"]))
     scene = (tmp_path / "runs" / "c" / "scenes" / "A-circular.yaml").read_text()
     assert "overlap_action: stop" in scene
+    # the second press: the same sheet pressed to 410 kPa, its permeability; one lay-down only
+    assert res["pressure_press"]["target_pressure_Pa"] == 4.1e5 and not res["pending"]
+    for key in ("pressure_pressed_span_thickness_m", "pressure_permeability_press_cfm"):
+        assert float(v[key]) > 0.0, key
+    assert float(v["pressure_press_max_pressure_Pa"]) >= 0.0
+    assert stats["pressure_permeability_press_cfm"]["n"] == 1.0
+    assert [r["sheet"] for r in res["sheets_pressure"]["circular"]] == [1, 2]
+    assert "mode: pressure" in (tmp_path / "runs" / "c" / "scenes" / "A-circular-pressure.yaml").read_text()
+    assert proc.stdout.count("laydown: done in") == 1 and "laydown copied" in proc.stdout, proc.stdout[-3000:]
+    runs = tmp_path / "runs" / "c"
+    for f in ("laydown/laydown.h5", "laydown/sheet.restart", "permeability-laydown/permeability.h5"):
+        assert ((runs / "A-circular-pressure-sweep" / "campaign_A_circular_pressure_000" / f).read_bytes()
+                == (runs / "A-circular-sweep" / "campaign_A_circular_000" / f).read_bytes()), f
     # resumed: a second call finds every stage up to date
     again = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, errors="replace", timeout=300, env=env)
     assert again.returncode == 0, again.stdout[-3000:] + again.stderr[-3000:]
     assert "up to date" in again.stdout and "done in" not in again.stdout, again.stdout[-3000:]
+    assert "laydown kept" in again.stdout and "copied" not in again.stdout, again.stdout[-3000:]
 
 
 def test_fiber_contact_override(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
@@ -221,3 +349,24 @@ def test_fiber_contact_override(setup: tuple[cp.Campaign, list[cp.Sheet], list[c
         base = cp.point_scene(c.model_copy(update={"fiber_contact": None}), pts[0], section, THESIS,
                               Path("runs/x"))  # type: ignore[arg-type]
         assert base["laydown"]["fiber_contact"] == "averaged" and base["contact"]["integrator"] == "cvode"
+
+
+def test_pressure_presses_wait_for_their_laydown(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 build_dir: Path) -> None:
+    """Before the point's sweep has laid its sheets down, its pressure presses are neither run nor
+    submitted (nothing is laid down for them): every seed waits, naming what is missing."""
+    import yaml
+
+    monkeypatch.chdir(tmp_path)
+    c, point = tiny_point(tmp_path)
+    Path("point.yaml").write_text(yaml.safe_dump(point))
+    Path("pressure.yaml").write_text(yaml.safe_dump(cp.pressure_scene(c, point)))
+    lines: list[str] = []
+    for submit in (None, executors.batch_options("slurm")):
+        pr = cp.run_pressure_sweep(Path("point.yaml"), Path("pressure.yaml"), 2, build_dir, lines.append, submit)
+        assert pr.started == [] and pr.failed == [] and not pr.submitted
+        assert sorted(pr.waiting) == ["campaign_A_circular_pressure_000", "campaign_A_circular_pressure_001"]
+        assert all("laydown absent" in w and "permeability absent" in w for w in pr.waiting.values())
+    assert pr.sweep_dir == Path("runs/A-circular-pressure-sweep") and (pr.sweep_dir / "sweep.json").is_file()
+    assert not (pr.sweep_dir / "jobs").exists() and not list(pr.sweep_dir.glob("campaign_*/*"))
+    assert any("not submitted" in line for line in lines)

@@ -3,9 +3,10 @@
 4.12/4.13 and per-sheet Markdown tables, checked against hand values (no simulation):
 
 - the table shows the JSON's simulated permeability (mean +- sd, n) and ratios (620 / 310 CFM ->
-  2.00), the thicknesses, and ``-`` where a sheet, a state or a section has no data;
-- run through the runner's own functions (summarise, sheet_ratios) the table gives the hand ratios
-  of both conventions;
+  2.00), the thicknesses, and ``-`` where a sheet, a state or a section has no data, for the three
+  states: unpressed, pressed to thickness, pressed to pressure (the second press, 410 kPa);
+- run through the runner's own functions (merge_pressure, summarise, sheet_ratios) the table gives
+  the hand ratios of both conventions, also for the pressure press;
 - the figures plot exactly the hand values at the right masses / fiber counts, error bars = sd
   (read back from the drawn Axes), and the PNG files are written (also for an empty campaign,
   which then shows the experiments alone).
@@ -34,9 +35,12 @@ def _st(mean: float, sd: float, n: int) -> dict[str, float]:
     return {"mean": mean, "sd": sd, "n": float(n)}
 
 
-#: a hand-made campaign: circular points S1, S2, A, C; rectangular S1 with a permeability only
+#: a hand-made campaign: circular points S1, S2, A, C; rectangular S1 with a permeability only;
+#: the pressure press (pressure_* metrics, sheets_pressure) for circular S1, A and C
 DATA: dict[str, Any] = {
     "command": "--collect-only", "seeds": 3, "failures": {},
+    "pressure_press": {"target_pressure_Pa": 410e3, "pressure_rate_Pa_s": None, "hold_time_s": 1e-3,
+                       "release_time_s": 1e-3},
     "points": [{"name": "A", "mass_kg": 35.7e-9, "experimental_mass_kg": 35.7e-9 * F, "press_target_m": 2e-6},
                {"name": "C", "mass_kg": 178.5e-9, "experimental_mass_kg": 178.5e-9 * F, "press_target_m": 87.6e-6},
                {"name": "S1", "mass_kg": 13.5e-9, "experimental_mass_kg": 13.5e-9, "press_target_m": 2e-6},
@@ -44,12 +48,17 @@ DATA: dict[str, Any] = {
     "summary": {
         "S1-circular": {"fibers": _st(20, 1, 3), "permeability_cfm": _st(620, 10, 3),
                         "sheet_thickness_m": _st(250e-6, 20e-6, 3), "permeability_press_cfm": _st(600, 5, 2),
-                        "pressed_span_thickness_m": _st(100e-6, 0, 2)},
+                        "pressed_span_thickness_m": _st(100e-6, 0, 2),
+                        "pressure_permeability_press_cfm": _st(450, 15, 2),
+                        "pressure_pressed_span_thickness_m": _st(60e-6, 4e-6, 2)},
         "S2-circular": {"fibers": _st(40, 0, 1), "permeability_cfm": _st(510, 0, 1)},
         "A-circular": {"fibers": _st(58, 1, 2), "permeability_cfm": _st(700, 14, 2),
-                       "sheet_thickness_m": _st(244.6e-6, 36.8e-6, 2)},
+                       "sheet_thickness_m": _st(244.6e-6, 36.8e-6, 2),
+                       "pressure_permeability_press_cfm": _st(680, 6, 2),
+                       "pressure_pressed_span_thickness_m": _st(200e-6, 10e-6, 2)},
         "C-circular": {"fibers": _st(290, 0, 1), "permeability_cfm": _st(500, 0, 1),
-                       "sheet_thickness_m": _st(300e-6, 0, 1)},
+                       "sheet_thickness_m": _st(300e-6, 0, 1), "pressure_permeability_press_cfm": _st(300, 0, 1),
+                       "pressure_pressed_span_thickness_m": _st(100e-6, 0, 1)},
         "S1-rectangular": {"permeability_cfm": _st(400, 8, 2)},
     },
     "sheets_unpressed": {
@@ -65,6 +74,12 @@ DATA: dict[str, Any] = {
     "sheets_pressed": {
         "circular": [{"sheet": 1, "measured_cfm": 310.0, "measured_thickness_m": 0.0,
                       "direct": {"mean": 600.0, "sd": 5.0, "n": 2.0, "ratio": 600 / 310}, "sem": None}],
+        "rectangular": [],
+    },
+    "sheets_pressure": {  # SEM at 13.5 ug: 680 + (300 - 680) x 2.66 / 43.36 = 656.7 CFM
+        "circular": [{"sheet": 1, "measured_cfm": 310.0, "measured_thickness_m": 0.0,
+                      "direct": {"mean": 450.0, "sd": 15.0, "n": 2.0, "ratio": 450 / 310},
+                      "sem": {"mean": 656.69, "ratio": 656.69 / 310}}],
         "rectangular": [],
     },
 }
@@ -95,13 +110,23 @@ def test_table_shows_the_json_values_and_dashes() -> None:
     assert t["2"][:7] == ["27.1", "255", "510.0 +- 0.0 (n=1)", "2.00", "-", "-", "10"]
     assert t["2"][7] == "-"  # S2 has no thickness
     assert t["4"] == ["62.9", "105", "-", "-", "-", "-", "93", "-", "-"]  # beyond case C
-    p = _table(md, "circular, pressed")
+    p = _table(md, "circular, pressed to thickness")
     assert p["1"][2:5] == ["600.0 +- 5.0 (n=2)", "1.94", "-"] and p["1"][7] == "100.0 +- 0.0 (n=2)"
     assert p["3"][2:] == ["-"] * 4 + ["82", "-", "-"]  # no pressed case points: no SEM thickness either
+    # pressed to pressure: S1 450 +- 15 CFM (450 / 310 = 1.45), SEM 656.7 (2.12); thickness 60 um
+    # direct, SEM 200 + (100 - 200) x 2.66 / 43.36 = 193.9 um
+    q = _table(md, "circular, pressed to pressure")
+    assert q["1"] == ["13.5", "310", "450.0 +- 15.0 (n=2)", "1.45", "656.7", "2.12", "0", "60.0 +- 4.0 (n=2)",
+                      "193.9"]
+    assert q["2"][2:6] == ["-"] * 4 and q["2"][7] == "-"  # no S2 pressure press
+    assert q["2"][8] == "162.5"  # SEM thickness at sheet 2 (27.1 ug): 200 - 100 x 16.26 / 43.36
+    assert q["4"][2:] == ["-"] * 4 + ["93", "-", "-"]  # beyond case C
+    assert "410 kPa" in md.split("## ")[0]
     r = _table(md, "rectangular, unpressed")
     assert r["1"][2:4] == ["400.0 +- 8.0 (n=2)", "1.29"]
     assert all(r[k][2:6] == ["-"] * 4 for k in "234567")
-    assert all(row[2:6] == ["-"] * 4 for row in _table(md, "rectangular, pressed").values())
+    for state in ("pressed to thickness", "pressed to pressure"):
+        assert all(row[2:6] == ["-"] * 4 for row in _table(md, f"rectangular, {state}").values())
 
 
 def test_table_through_the_runner_functions() -> None:
@@ -110,16 +135,31 @@ def test_table_through_the_runner_functions() -> None:
     ug) and C (500 CFM, 54.2 ug): 700 - 200 x 2.66 / 43.36 = 687.7 CFM, ratio 2.22."""
     c = cp.load_campaign(THESIS / "campaign.yaml")
     pts = cp.points(c, SHEETS)
-    summary = cp.summarise({"S1-circular": [{"permeability_cfm": "600"}, {"permeability_cfm": "640"}],
-                            "A-circular": [{"permeability_cfm": "700"}], "C-circular": [{"permeability_cfm": "500"}]})
+    s1 = [{"seed": "1", "permeability_cfm": "600"}, {"seed": "2", "permeability_cfm": "640"}]
+    # the pressure press of the same sheets (seed for seed): 400 and 420 CFM; A 500, C 300 CFM
+    s1, _ = cp.merge_pressure(s1, [{**r, "permeability_press_cfm": x} for r, x in zip(s1, ("400", "420"), strict=True)])
+    a, _ = cp.merge_pressure([{"seed": "1", "permeability_cfm": "700"}],
+                             [{"seed": "1", "permeability_cfm": "700", "permeability_press_cfm": "500"}])
+    cc, _ = cp.merge_pressure([{"seed": "1", "permeability_cfm": "500"}],
+                              [{"seed": "1", "permeability_cfm": "500", "permeability_press_cfm": "300"}])
+    summary = cp.summarise({"S1-circular": s1, "A-circular": a, "C-circular": cc})
     data = {"points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg}
                        for p in pts], "summary": summary,
             "sheets_unpressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular")},
-            "sheets_pressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular", "permeability_press_cfm")}}
-    t = _table(cr.markdown(data, SHEETS), "circular, unpressed")
+            "sheets_pressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular", "permeability_press_cfm")},
+            "sheets_pressure": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular",
+                                                            "pressure_permeability_press_cfm")}}
+    md = cr.markdown(data, SHEETS)
+    t = _table(md, "circular, unpressed")
     assert t["1"][2:6] == ["620.0 +- 28.3 (n=2)", "2.00", "687.7", "2.22"]
     assert t["3"][2:6] == ["-", "-", "542.0", "3.10"]  # 700 - 200 x 34.26 / 43.36 = 542.0; / 175
     assert t["4"][4:6] == ["-", "-"]  # 62.9 ug: beyond case C
+    # pressed to pressure: S1 410 +- 14.1 (410 / 310 = 1.32); SEM 500 - 200 x 2.66 / 43.36 = 487.7
+    # (/ 310 = 1.57), sheet 3: 500 - 200 x 34.26 / 43.36 = 342.0 (/ 175 = 1.95)
+    q = _table(md, "circular, pressed to pressure")
+    assert q["1"][2:6] == ["410.0 +- 14.1 (n=2)", "1.32", "487.7", "1.57"]
+    assert q["3"][2:6] == ["-", "-", "342.0", "1.95"]
+    assert all(row[2:6] == ["-"] * 4 for row in _table(md, "circular, pressed to thickness").values())
 
 
 def _container(ax: Any, label: str) -> ErrorbarContainer:
@@ -154,16 +194,25 @@ def test_permeability_figure_plots_the_hand_values() -> None:
     x, y, xerr, yerr = _drawn(_container(axes[0], "circular, unpressed"))
     assert x.tolist() == pytest.approx([13.5, 27.1]) and y.tolist() == [620, 510]
     assert xerr is None and yerr is not None and yerr.tolist() == pytest.approx([10, 0])
-    x, y, _, yerr = _drawn(_container(axes[0], "circular, pressed"))
+    x, y, _, yerr = _drawn(_container(axes[0], "circular, pressed to thickness"))
     assert (x.tolist(), y.tolist(), yerr.tolist()) == (pytest.approx([13.5]), [600], pytest.approx([5]))  # type: ignore[union-attr]
+    c = _container(axes[0], "circular, pressed to pressure")
+    x, y, _, yerr = _drawn(c)
+    assert (x.tolist(), y.tolist(), yerr.tolist()) == (pytest.approx([13.5]), [450], pytest.approx([15]))  # type: ignore[union-attr]
+    assert (c.lines[0].get_marker(), c.lines[0].get_linestyle()) == ("D", "-.")
     x, y, _, yerr = _drawn(_container(axes[0], "rectangular, unpressed"))
     assert (x.tolist(), y.tolist(), yerr.tolist()) == (pytest.approx([13.5]), [400], pytest.approx([8]))  # type: ignore[union-attr]
-    assert {s.label for s in drawn[("direct", "mass")]} == {"experiment (Table 4.1)", "circular, unpressed",
-                                                            "circular, pressed", "rectangular, unpressed"}
+    assert {s.label for s in drawn[("direct", "mass")]} == {
+        "experiment (Table 4.1)", "circular, unpressed", "circular, pressed to thickness",
+        "circular, pressed to pressure", "rectangular, unpressed"}
+    assert "pressed to pressure: 410 kPa" in fig.texts[0].get_text()  # the suptitle
     # SEM, mass: cases A, C at their mapped masses (10.84, 54.2 ug); sheet points not shown
     x, y, _, yerr = _drawn(_container(axes[2], "circular, unpressed"))
     assert x.tolist() == pytest.approx([10.84, 54.2], rel=1e-4) and y.tolist() == [700, 500]
     assert yerr.tolist() == pytest.approx([14, 0])  # type: ignore[union-attr]
+    x, y, _, yerr = _drawn(_container(axes[2], "circular, pressed to pressure"))
+    assert x.tolist() == pytest.approx([10.84, 54.2], rel=1e-4) and y.tolist() == [680, 300]
+    assert yerr.tolist() == pytest.approx([6, 0])  # type: ignore[union-attr]
     # direct, fibers: S1, S2 at their fiber counts (x error bars = sd); the sheets at the same counts
     x, y, xerr, yerr = _drawn(_container(axes[1], "circular, unpressed"))
     assert x.tolist() == [20, 40] and xerr.tolist() == pytest.approx([1, 0]) and yerr.tolist() == pytest.approx([10, 0])  # type: ignore[union-attr]
@@ -187,18 +236,23 @@ def test_thickness_figure_in_um() -> None:
     assert x.tolist() == pytest.approx([13.5]) and y.tolist() == pytest.approx([250]) and yerr.tolist() == pytest.approx([20])  # type: ignore[union-attr]
     x, y, _, yerr = _drawn(_container(fig.axes[2], "circular, unpressed"))
     assert y.tolist() == pytest.approx([244.6, 300]) and yerr.tolist() == pytest.approx([36.8, 0])  # type: ignore[union-attr]
+    x, y, _, yerr = _drawn(_container(fig.axes[0], "circular, pressed to pressure"))
+    assert y.tolist() == pytest.approx([60]) and yerr.tolist() == pytest.approx([4])  # type: ignore[union-attr]
+    x, y, _, yerr = _drawn(_container(fig.axes[2], "circular, pressed to pressure"))
+    assert y.tolist() == pytest.approx([200, 100]) and yerr.tolist() == pytest.approx([10, 0])  # type: ignore[union-attr]
     assert not any(s.section == "rectangular" for s in drawn[("direct", "mass")])
 
 
 def test_empty_campaign_gives_the_experiments_alone(tmp_path: Path) -> None:
-    for data in ({}, {**copy.deepcopy(DATA), "summary": {}, "sheets_unpressed": {}, "sheets_pressed": {}}):
+    for data in ({}, {**copy.deepcopy(DATA), "summary": {}, "sheets_unpressed": {}, "sheets_pressed": {},
+                      "sheets_pressure": {}}):
         for q in cr.QUANTITIES:
             fig, drawn = cr.figure(data, SHEETS, q)
             assert [s.label for s in drawn[("direct", "mass")]] == ["experiment (Table 4.1)"]
             assert [s.label for s in drawn[("sem", "mass")]] == ["experiment (Table 4.1)"]
             assert drawn[("direct", "fibers")] == [] == drawn[("sem", "fibers")]
         md = cr.markdown(data, SHEETS)
-        for title in ("circular, unpressed", "rectangular, pressed"):
+        for title in ("circular, unpressed", "rectangular, pressed to thickness", "circular, pressed to pressure"):
             t = _table(md, title)
             assert t["5"] == ["90.0", "58", "-", "-", "-", "-", "97", "-", "-"]
     written = cr.write_report({}, SHEETS, tmp_path / "campaign.json")

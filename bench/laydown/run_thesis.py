@@ -6,8 +6,9 @@ thesis' physics and with speed options, on 1 or 2 MPI ranks.
 Each run is ``fiberform run SCENE --to laydown`` of a case scene (scenes/thesis/case-X-Y.yaml)
 with the variant's fields set, in its own folder ``runs/bench-laydown/<case>-<variant>-r<ranks>-s<seed>/``
 (kept: a second call resumes or skips finished stages; the generate, fabric and flow stages are
-taken over from an earlier run of the same case and seed when their inputs are identical). The
-numbers come from laydown.h5, the fiberdem log and the process accounting:
+taken over from an earlier run of the same case and seed when their inputs are identical:
+fiberform.reuse.adopt_stages). The numbers come from laydown.h5, the fiberdem log and the process
+accounting:
 
 * simulated time, settled or not, wall time of the lay-down program, node-steps per second;
 * the sheet: thickness, grammage, smallest fiber-fiber gap and element-yarn clearance (the
@@ -45,7 +46,6 @@ import argparse
 import json
 import os
 import resource
-import shutil
 import subprocess
 import sys
 import time
@@ -59,6 +59,9 @@ import yaml
 from fiberform.campaign import use_fiber_contact
 from fiberform.products import read_sheet
 from fiberform.provenance import atomic_write_text, machine_info
+from fiberform.reuse import adopt_stages
+from fiberform.scene import load_scene
+from fiberform.stages import StageContext
 from fiberform.sweep import set_field
 
 HERE = Path(__file__).resolve().parent
@@ -75,7 +78,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
-SHARED_STAGES = ("fibers", "fabric", "flow")  # stage folders a variant can take over
+SHARED_STAGES = ("generate", "fabric", "flow")  # stages a variant can take over
 THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given
 
 
@@ -98,16 +101,18 @@ def scene_for(case: str, variant: str, ranks: int, seed: int, max_time: float | 
     return name, data
 
 
-def donor_stages(runs: Path, case: str, seed: int, target: Path) -> None:
-    """Copy generate/fabric/flow folders of an earlier run of the same case and seed (the stages
-    check their input hashes and run again if anything differs)."""
+def donor_stages(runs: Path, case: str, seed: int, target: Path, build: Path) -> None:
+    """Take over the generate, fabric and flow folders of an earlier run of the same case and seed
+    (fiberform.reuse.adopt_stages: copied only where the target's stages then find them up to
+    date, i.e. made from the same inputs; otherwise they run as usual). ``target`` holds the
+    run's scene.yaml."""
+    scene = load_scene(target / "scene.yaml")
+    # its output_dir is relative to ROOT (the runs' working directory), this process's may differ
+    scene = scene.model_copy(update={"output_dir": str(target.resolve())})
+    ctx = StageContext(scene=scene, scene_path=target / "scene.yaml", build_dir=build)
     for other in sorted(runs.glob(f"{case}-*-s{seed}")):
-        if other == target:
-            continue
-        for stage in SHARED_STAGES:
-            src, dst = other / stage, target / stage
-            if src.is_dir() and not dst.exists() and any(src.glob("*.h5")):
-                shutil.copytree(src, dst)
+        if other != target:
+            adopt_stages(ctx, other, SHARED_STAGES)
 
 
 def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | None, runs: Path,
@@ -117,7 +122,7 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
     out.mkdir(parents=True, exist_ok=True)
     scene = out / "scene.yaml"
     atomic_write_text(scene, yaml.safe_dump(data, sort_keys=False))
-    donor_stages(ROOT / runs, case, seed, out)
+    donor_stages(ROOT / runs, case, seed, out, build)
     t0 = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "fiberform", "run", str(scene), "--to", "laydown",
                            "--build-dir", str(build)], cwd=ROOT, capture_output=True, text=True)

@@ -6,9 +6,16 @@ For every point (thesis cases A-F, G, and the seven experimental sheets' masses;
 scenes/thesis/campaign.yaml) and cross-section, a scene is derived from the shipped case scenes
 (fiberform.campaign.point_scene) into ``runs/thesis-campaign/scenes/`` and run through
 ``fiberform sweep SCENE --seeds N`` (generate, fabric, flow, lay-down, permeability, press to the
-experimental thickness, permeability of the pressed sheet). Finished stages are skipped, so the
-same command resumes the campaign. ``--submit slurm|pbs`` submits each sweep as job arrays
-instead (then run again without --submit, or with --collect-only, once they are done).
+experimental thickness, permeability of the pressed sheet). With ``pressure_press`` in the
+campaign, each laid-down sheet is then pressed a second time, to that pressure
+(fiberform.campaign.pressure_scene, run_pressure_sweep: the scene ``<point>-<section>-pressure.yaml``
+differs from the point's only in ``press``; its sweep takes over each seed's finished generate,
+fabric, flow, lay-down and permeability folders, so nothing is laid down twice, and runs the press
+and the pressed permeability). Finished stages are skipped, so the same command resumes the
+campaign. ``--submit slurm|pbs`` submits each sweep as job arrays instead; the pressure presses of
+a point can only be submitted once its sweep has finished the lay-downs and permeabilities (they
+are copied, not awaited by a job dependency): run the same command again then (and without
+--submit, or with --collect-only, once everything is done).
 
     .venv/bin/python bench/thesis/run.py --reduced            # make validate: A and C, seed 1
     .venv/bin/python bench/thesis/run.py                      # the full campaign (cluster scale)
@@ -18,7 +25,9 @@ instead (then run again without --submit, or with --collect-only, once they are 
 Writes bench/thesis/results/campaign[-reduced].json: the machine, per variant (point, section,
 seed) the collected metrics and stage wall times with the ranks each stage ran on, per point the
 mean and sd over seeds, and per experimental sheet simulated / measured permeability in both mass
-conventions (docs/validation/table41.md). A variant that failed is listed with its error.
+conventions, unpressed, pressed to thickness and pressed to pressure (docs/validation/table41.md).
+A variant that failed is listed with its error; a pressure press that waits for its lay-down is
+listed under ``pending``.
 Next to it (fiberform.campaign_report): campaign[-reduced]-fig412-thickness.png and
 campaign[-reduced]-fig413-permeability.png (thesis Figs. 4.12/4.13 redrawn) and campaign[-reduced].md
 (per-sheet tables); --collect-only redraws them from what has finished.
@@ -39,7 +48,8 @@ from typing import Any
 import yaml
 
 from fiberform import campaign as cp
-from fiberform import campaign_report
+from fiberform import campaign_report, executors
+from fiberform.errors import FiberformError
 from fiberform.provenance import atomic_write_text, machine_info
 from fiberform.scene import load_scene
 
@@ -52,7 +62,33 @@ def _csv_list(text: str) -> list[str]:
     return [t for t in (s.strip() for s in text.split(",")) if t]
 
 
+def _write_scene(path: Path, header: str, data: dict[str, Any]) -> None:
+    text = header + yaml.safe_dump(data, sort_keys=False)
+    if not path.is_file() or path.read_text() != text:
+        atomic_write_text(path, text)
+
+
+def _read_collect(sweep_dir: Path, fiberform: list[str], build: Path, label: str) -> list[dict[str, str]]:
+    """``fiberform collect SWEEP_DIR`` and its collect.csv rows (none before the sweep exists)."""
+    if not (sweep_dir / "sweep.json").is_file():
+        return []
+    col = subprocess.run([*fiberform, "collect", str(sweep_dir), "--build-dir", str(build)],
+                         capture_output=True, text=True)
+    if col.returncode != 0:
+        print(f"== {label}: fiberform collect failed: {col.stderr.strip()[-500:]}", file=sys.stderr)
+    table = sweep_dir / "collect.csv"
+    return list(csv.DictReader(table.read_text().splitlines())) if table.is_file() else []
+
+
 def main() -> int:
+    try:
+        return _main()
+    except FiberformError as exc:
+        print(f"run.py: error: {exc}", file=sys.stderr)
+        return exc.exit_status
+
+
+def _main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--campaign", type=Path, default=THESIS / "campaign.yaml",
                     help="campaign definition; its folder holds the base scenes and experiments.csv")
@@ -96,7 +132,10 @@ def main() -> int:
 
     chosen = [p for p in pts if p.name in names]
     groups: dict[str, Path] = {}  # "A-circular" -> sweep dir
+    pressure_groups: dict[str, Path] = {}  # "A-circular" -> the pressure presses' sweep dir
     failures: dict[str, str] = {}
+    pending: dict[str, dict[str, str]] = {}  # "A-circular-pressure" -> {variant: why it waits}
+    opts = executors.batch_options(args.submit) if args.submit else None
     t_start = time.monotonic()
     for p in chosen:
         for section in sections:
@@ -106,11 +145,14 @@ def main() -> int:
             header = (f"# campaign point {p.name} ({p.mass_kg * 1e9:.2f} ug, experimental mass "
                       f"{p.experimental_mass_kg * 1e9:.2f} ug, press target {p.press_target_m * 1e6:.1f} um), "
                       f"{section}: derived by bench/thesis/run.py from {c.base[section]}\n")  # type: ignore[index]
-            text = header + yaml.safe_dump(data, sort_keys=False)
-            if not scene_path.is_file() or scene_path.read_text() != text:
-                atomic_write_text(scene_path, text)
-            sweep_dir = Path(f"{load_scene(scene_path).output_dir}-sweep")
-            groups[group] = sweep_dir
+            _write_scene(scene_path, header, data)
+            groups[group] = Path(f"{load_scene(scene_path).output_dir}-sweep")
+            pressure_path = scenes_dir / f"{group}-pressure.yaml"
+            if c.pressure_press is not None:
+                _write_scene(pressure_path, f"# the second press of campaign point {group}: {scene_path.name} "
+                             f"with press in pressure mode ({c.pressure_press.target_pressure_Pa:g} Pa), derived by "
+                             "bench/thesis/run.py\n", cp.pressure_scene(c, data))
+                pressure_groups[group] = Path(f"{load_scene(pressure_path).output_dir}-sweep")
             if args.collect_only:
                 continue
             cmd = [*fiberform, "sweep", str(scene_path), "--seeds", str(seeds), "--build-dir", str(build)]
@@ -122,18 +164,35 @@ def main() -> int:
             print(f"== {group}: exit {proc.returncode} after {time.monotonic() - t0:.0f} s", flush=True)
             if proc.returncode != 0:
                 failures[group] = f"fiberform sweep exit {proc.returncode} (see its output above)"
+            if c.pressure_press is None:
+                continue
+            print(f"== {group}-pressure: the second press ({pressure_path}), lay-downs taken over from "
+                  f"{groups[group]}", flush=True)
+            try:
+                pr = cp.run_pressure_sweep(scene_path, pressure_path, seeds, build,
+                                           lambda line: print(line, flush=True), opts)
+            except FiberformError as exc:
+                failures[f"{group}-pressure"] = str(exc)
+                continue
+            if pr.waiting:
+                pending[f"{group}-pressure"] = pr.waiting
+                print(f"== {group}-pressure: {len(pr.waiting)} seed(s) wait for their lay-down and permeability "
+                      f"in {groups[group]} (not laid down again)" + (": run this command again once they are done"
+                                                                    if args.submit else ""), flush=True)
+            if pr.failed:
+                failures[f"{group}-pressure"] = f"failed: {', '.join(pr.failed)} (see the output above)"
 
     collected: dict[str, list[dict[str, str]]] = {}
     variants: list[dict[str, Any]] = []
     for group, sweep_dir in groups.items():
-        if not (sweep_dir / "sweep.json").is_file():
+        rows = _read_collect(sweep_dir, fiberform, build, group)
+        if group in pressure_groups:
+            rows, problems = cp.merge_pressure(rows, _read_collect(pressure_groups[group], fiberform, build,
+                                                                   f"{group}-pressure"))
+            if problems:
+                failures[f"{group}-pressure"] = "; ".join(problems)
+        if not rows and not (sweep_dir / "sweep.json").is_file():
             continue
-        col = subprocess.run([*fiberform, "collect", str(sweep_dir), "--build-dir", str(build)],
-                             capture_output=True, text=True)
-        if col.returncode != 0:
-            print(f"== {group}: fiberform collect failed: {col.stderr.strip()[-500:]}", file=sys.stderr)
-        table = sweep_dir / "collect.csv"
-        rows = list(csv.DictReader(table.read_text().splitlines())) if table.is_file() else []
         collected[group] = rows
         point, section = group.split("-", 1)
         scene = load_scene(next(iter(sorted((sweep_dir / "scenes").glob("*.yaml")))))
@@ -145,14 +204,18 @@ def main() -> int:
     ratios = {s: cp.sheet_ratios(c, sheets, pts, summary, s) for s in sections}  # type: ignore[arg-type]
     ratios_pressed = {s: cp.sheet_ratios(c, sheets, pts, summary, s, "permeability_press_cfm")
                       for s in sections}  # type: ignore[arg-type]
+    ratios_pressure = {s: cp.sheet_ratios(c, sheets, pts, summary, s, "pressure_permeability_press_cfm")
+                       for s in sections}  # type: ignore[arg-type]
     out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
     cp.write_json(out, {
         "campaign": str(args.campaign),
         "command": " ".join(sys.argv[1:]), "machine": machine_info(), "seeds": seeds,
         "points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
                     "press_target_m": p.press_target_m} for p in chosen],
-        "wall_s": time.monotonic() - t_start, "failures": failures, "variants": variants,
-        "summary": summary, "sheets_unpressed": ratios, "sheets_pressed": ratios_pressed})
+        "pressure_press": None if c.pressure_press is None else c.pressure_press.model_dump(),
+        "wall_s": time.monotonic() - t_start, "failures": failures, "pending": pending, "variants": variants,
+        "summary": summary, "sheets_unpressed": ratios, "sheets_pressed": ratios_pressed,
+        "sheets_pressure": ratios_pressure})
     print(f"wrote {out}")
     for path in campaign_report.write_report(json.loads(out.read_text()), sheets, out):
         print(f"wrote {path}")

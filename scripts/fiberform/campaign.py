@@ -6,7 +6,19 @@ The thesis (Kettil 2016, sec. 4.2) compares simulated sheets with seven experime
 experiments, derives one scene per point (a thesis case by its mass factor, or an experimental
 sheet by its scaled mass) and cross-section from the shipped case scenes, with the press stage
 set to the experimental thickness, and turns the sweeps' ``collect.csv`` tables into per-point
-statistics and per-sheet ratios in the two mass conventions:
+statistics and per-sheet ratios in the two mass conventions.
+
+The second press (``pressure_press`` of campaign.yaml): every laid-down sheet is also pressed in
+pressure mode. Its scene (:func:`pressure_scene`) equals the point's scene except in ``press``
+(and name and output folder); its sweep (``<point output>-pressure-sweep``) has one variant per
+seed like the point's own sweep, and :func:`run_pressure_sweep` copies each seed's finished
+generate, fabric, flow, lay-down and unpressed-permeability folders from the point's variant into
+it (:func:`fiberform.reuse.adopt_stages`, only where the stages' hash checks then skip them) before
+running or submitting the press and the pressed permeability. A seed whose upstream stages are not
+all adopted is not run: no sheet is laid down twice. Its metrics join the point's rows with the
+prefix ``pressure_`` (:func:`merge_pressure`).
+
+The two mass conventions:
 
 * direct: an experimental sheet's scaled mass is laid down as it is (no re-matching);
 * SEM (the thesis' sec. 5.1): simulated case B equals sheet 2, other masses linearly, i.e.
@@ -21,9 +33,10 @@ import csv
 import json
 import math
 import statistics
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -31,8 +44,13 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from .errors import ConfigError
 from .scene import parse_scene, read_scene_yaml
 
-__all__ = ["Campaign", "Point", "Sheet", "load_campaign", "points", "point_scene", "read_experiments",
-           "sem_interp", "summarise", "sheet_ratios", "use_fiber_contact"]
+if TYPE_CHECKING:
+    from .executors import BatchOptions
+    from .sweep import Variant
+
+__all__ = ["Campaign", "Point", "PressureSweep", "Sheet", "load_campaign", "merge_pressure", "points",
+           "point_scene", "pressure_scene", "read_experiments", "run_pressure_sweep", "sem_interp", "summarise",
+           "sheet_ratios", "use_fiber_contact"]
 
 Section = Literal["circular", "rectangular"]
 
@@ -47,6 +65,17 @@ class CampaignPress(_Strict):
     hold_time_s: float = Field(ge=0.0, le=10.0)
     output_interval_s: float = Field(gt=0.0, le=1.0)
     overlap_limit: float = Field(gt=0.0, le=1.0)
+
+
+class CampaignPressurePress(_Strict):
+    """The second press of every laid-down sheet: pressure mode (docs/stages/press.md); plate
+    speed (the servo's speed limit), output interval and overlap guard (limit, action stop) as
+    in ``press``."""
+
+    target_pressure_Pa: float = Field(gt=0.0, le=1e9)
+    pressure_rate_Pa_s: float | None = Field(default=None, gt=0.0, le=1e15)
+    hold_time_s: float = Field(ge=0.0, le=10.0)
+    release_time_s: float = Field(ge=0.0, le=10.0)
 
 
 class Reduced(_Strict):
@@ -74,6 +103,7 @@ class Campaign(_Strict):
     sem_mapping: SemMapping
     fiber_contact: Literal["averaged", "newton"] | None = None
     press: CampaignPress
+    pressure_press: CampaignPressurePress | None = None
     reduced: Reduced
 
     @field_validator("cases")
@@ -194,13 +224,133 @@ def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, o
     return data
 
 
+def pressure_scene(c: Campaign, point: dict[str, Any]) -> dict[str, Any]:
+    """The scene of a point's second press, from the point's scene data (:func:`point_scene`):
+    the same in every section but ``press`` (pressure mode at ``pressure_press``; plate speed,
+    output interval and overlap guard (stop) of ``press``; the same ranks), with ``_pressure``
+    added to the name and ``-pressure`` to the output folder. Validated (SceneError); ConfigError
+    when the campaign has no ``pressure_press``."""
+    pp = c.pressure_press
+    if pp is None:
+        raise ConfigError("pressure_press: not in the campaign (the second press is off)")
+    data: dict[str, Any] = json.loads(json.dumps(point))  # a deep copy of plain YAML data
+    data["name"] = f"{point['name']}_pressure"
+    data["output_dir"] = f"{point['output_dir']}-pressure"
+    press: dict[str, Any] = {"mode": "pressure", "target_pressure_Pa": pp.target_pressure_Pa}
+    if pp.pressure_rate_Pa_s is not None:
+        press["pressure_rate_Pa_s"] = pp.pressure_rate_Pa_s
+    press.update(hold_time_s=pp.hold_time_s, release_time_s=pp.release_time_s,
+                 plate_speed_m_s=c.press.plate_speed_m_s, output_interval_s=c.press.output_interval_s,
+                 overlap_limit=c.press.overlap_limit, overlap_action="stop", ranks=point["press"]["ranks"])
+    data["press"] = press
+    parse_scene(data, f"campaign pressure press {data['name']}")
+    return data
+
+
+#: the stages a pressure-press variant takes over from the point's variant of the same seed
+REUSED_STAGES = ("generate", "fabric", "flow", "laydown", "permeability")
+
+
+@dataclass
+class PressureSweep:
+    """What :func:`run_pressure_sweep` did: the sweep folder, the variants run (or submitted),
+    those not started because their point variant has not finished the reused stages (variant
+    -> why), and those that failed."""
+
+    sweep_dir: Path
+    started: list[str]
+    waiting: dict[str, str]
+    failed: list[str]
+    submitted: bool = False
+
+
+def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_dir: Path,
+                       echo: Callable[[str], None], submit: BatchOptions | None = None) -> PressureSweep:
+    """The second press of every seed of a point: the sweep of ``pressure_path`` (scene files and
+    sweep.json as ``fiberform sweep PRESSURE --seeds N``), each variant's :data:`REUSED_STAGES`
+    adopted from the variant of ``fiberform sweep POINT --seeds N`` with the same seed
+    (:func:`fiberform.reuse.adopt_stages`: copied only where the stage then counts as up to date).
+    Only variants whose reused stages are all up to date are started, and only from the press on
+    (press, permeability-press), so no lay-down runs here. ``submit``: the press and pressed
+    permeability as job arrays (:func:`fiberform.sweep.submit_sweep`), only once every variant
+    is ready (a job array covers all variants). A second call skips what has finished."""
+    from .reuse import adopt_stages
+    from .stages import StageContext
+    from .sweep import expand, run_sweep, submit_sweep, variant_path, write_sweep
+
+    _, point_variants = expand(point_path, [], seeds)
+    sweep_dir, variants = expand(pressure_path, [], seeds)
+    donors = {v.seed: Path(v.data["output_dir"]) for v in point_variants}
+    write_sweep(pressure_path, sweep_dir, variants, [])  # the stages hash files beside the variant scenes
+    ready: list[Variant] = []
+    waiting: dict[str, str] = {}
+    for v in variants:
+        ctx = StageContext(scene=parse_scene(v.data, v.name), scene_path=variant_path(sweep_dir, v),
+                           build_dir=build_dir)
+        done = adopt_stages(ctx, donors[v.seed], REUSED_STAGES)
+        echo(f"{v.name} (seed {v.seed}) from {donors[v.seed]}: "
+             + ", ".join(f"{a.stage} {a.action}" for a in done))
+        missing = [a for a in done if not a.up_to_date]
+        if missing:
+            waiting[v.name] = "; ".join(f"{a.stage} {a.action}" + (f" ({a.detail})" if a.detail else "")
+                                        for a in missing)
+        else:
+            ready.append(v)
+    out = PressureSweep(sweep_dir, [], waiting, [])
+    if submit is not None:
+        if waiting:
+            echo(f"{sweep_dir}: not submitted: {len(waiting)} of {len(variants)} seed(s) wait for their point "
+                 "variant's lay-down and permeability (not laid down again here); run again once those are done")
+            return out
+        submit_sweep(submit, pressure_path, sweep_dir, variants, [], build_dir, "press", None, dry_run=False,
+                     echo=echo)
+        out.started, out.submitted = [v.name for v in variants], True
+        return out
+    out.failed = run_sweep([variant_path(sweep_dir, v) for v in ready], build_dir, "press", None, echo)
+    out.started = [v.name for v in ready]
+    return out
+
+
 # -- results ---------------------------------------------------------------------------------------
 
+#: the collect.csv columns of the press and the pressed permeability (prefix ``pressure_`` for
+#: the second press, :func:`merge_pressure`)
+PRESS_METRICS = ("press_plate_gap_m", "press_max_pressure_Pa", "press_stopped_by_guard",
+                 "pressed_span_thickness_m", "permeability_press_cfm", "press_wall_s",
+                 "permeability-press_wall_s")
 #: the collect.csv columns the campaign reports (SI units in the names)
 METRICS = ("fibers", "fiber_mass_kg", "settled", "laydown_simulated_time_s", "sheet_thickness_m",
-           "grammage_kg_m2", "permeability_cfm", "press_plate_gap_m", "press_stopped_by_guard",
-           "pressed_span_thickness_m", "permeability_press_cfm", "laydown_wall_s", "press_wall_s",
-           "permeability_wall_s", "permeability_press_wall_s")
+           "grammage_kg_m2", "permeability_cfm", *PRESS_METRICS, "laydown_wall_s", "permeability_wall_s",
+           *(f"pressure_{m}" for m in PRESS_METRICS))
+#: columns of the stages after the lay-down that a pressure-press row adds to the point's row
+_PRESS_COLUMNS = ("press_", "pressed_", "permeability_press_", "permeability-press_")
+#: columns that must agree between a point's row and its pressure-press row (the same sheet,
+#: copied: the wall times are those recorded in the copied products)
+SAME_SHEET = ("fibers", "fiber_mass_kg", "sheet_thickness_m", "grammage_kg_m2", "permeability_cfm",
+              "laydown_wall_s", "permeability_wall_s")
+
+
+def merge_pressure(rows: list[dict[str, str]], pressure_rows: list[dict[str, str]]) -> tuple[list[dict[str, str]], list[str]]:
+    """The point's collect rows with the pressure-press sweep's press and pressed-permeability
+    columns added as ``pressure_<column>`` (joined by seed), and the problems: a pressure row
+    whose sheet columns (:data:`SAME_SHEET`) differ from the point's is not joined."""
+    by_seed = {r.get("seed"): r for r in pressure_rows}
+    out: list[dict[str, str]] = []
+    problems: list[str] = []
+    for r in rows:
+        merged = dict(r)
+        p = by_seed.get(r.get("seed"))
+        press = {} if p is None else {k: v for k, v in p.items() if k.startswith(_PRESS_COLUMNS) and v != ""}
+        if press:
+            assert p is not None
+            differ = [k for k in SAME_SHEET if p.get(k, "") != r.get(k, "")]
+            if differ:
+                problems.append(f"seed {r.get('seed')}: the pressure press's {', '.join(differ)} differ from the "
+                                "point's (not the same sheet); not joined")
+            else:
+                merged.update({f"pressure_{k}": v for k, v in press.items()})
+        out.append(merged)
+    return out, problems
 
 
 def _number(v: str) -> float | None:

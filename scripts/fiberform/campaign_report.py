@@ -7,13 +7,21 @@ dict and the experiments (``campaign.read_experiments``) into
 
 * the thesis' Figures 4.12 (sheet thickness, um) and 4.13 (air permeability at 125 Pa, CFM)
   redrawn: against the injection mass (ug on 3 x 3 mm) and against the number of generated
-  fibers, the experiments (Table 4.1) against the simulation (circular and rectangular sections,
-  unpressed and pressed; error bars = sd over seeds), in both mass conventions: direct (points
+  fibers, the experiments (Table 4.1) against the simulation (circular and rectangular sections;
+  unpressed, pressed to the experimental thickness and pressed to the campaign's stated pressure;
+  error bars = sd over seeds), in both mass conventions: direct (points
   S1..S7 at the sheets' own scaled masses) and SEM (case points A..G at their SEM-mapped masses).
   On the fiber axis an experimental sheet sits at the fiber count of its simulated counterpart in
   that convention and section (direct: point Sk; SEM: the case points interpolated at its mass);
-* a Markdown table per section and state (unpressed, pressed): per sheet the measured and the
-  simulated permeability and their ratio in both conventions, and the thicknesses.
+* a Markdown table per section and state (unpressed, pressed to thickness, pressed to pressure):
+  per sheet the measured and the simulated permeability and their ratio in both conventions, and
+  the thicknesses.
+
+States (:data:`STATES`, their labels :data:`STATE_LABELS`): ``unpressed`` (the lay-down's sheet),
+``pressed`` (the campaign's velocity-controlled press to the experimental thickness; JSON
+``sheets_pressed``, metrics ``permeability_press_cfm``, ``pressed_span_thickness_m``) and
+``pressure`` (the second press, pressure-controlled, of the same sheet; JSON ``sheets_pressure``,
+metrics ``pressure_permeability_press_cfm``, ``pressure_pressed_span_thickness_m``).
 
 Points without data are left out (figures) or shown as ``-`` (tables); an empty campaign gives
 the experiments alone.
@@ -34,16 +42,18 @@ from .provenance import atomic_write_text, in_progress_path
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["QUANTITIES", "Series", "figure", "figure_series", "markdown", "write_figure", "write_report"]
+__all__ = ["QUANTITIES", "STATES", "STATE_LABELS", "Series", "figure", "figure_series", "markdown", "write_figure", "write_report"]
 
 Convention = Literal["direct", "sem"]
 Axis = Literal["mass", "fibers"]
-State = Literal["unpressed", "pressed"]
+State = Literal["unpressed", "pressed", "pressure"]
 Summary = dict[str, dict[str, dict[str, float]]]
 Row = tuple[float, float, float, float, str]  # x, sd of x, y, sd of y, name
 
 SECTIONS = ("circular", "rectangular")
-STATES: tuple[State, ...] = ("unpressed", "pressed")
+STATES: tuple[State, ...] = ("unpressed", "pressed", "pressure")
+STATE_LABELS: dict[State, str] = {"unpressed": "unpressed", "pressed": "pressed to thickness",
+                                  "pressure": "pressed to pressure"}
 CONVENTIONS: tuple[Convention, ...] = ("direct", "sem")
 AXES: tuple[Axis, ...] = ("mass", "fibers")
 
@@ -60,9 +70,11 @@ class Quantity:
 
 
 QUANTITIES = {
-    "thickness": Quantity({"unpressed": "sheet_thickness_m", "pressed": "pressed_span_thickness_m"},
+    "thickness": Quantity({"unpressed": "sheet_thickness_m", "pressed": "pressed_span_thickness_m",
+                           "pressure": "pressure_pressed_span_thickness_m"},
                           "thickness_m", 1e6, "sheet thickness (um)", "fig412-thickness"),
-    "permeability": Quantity({"unpressed": "permeability_cfm", "pressed": "permeability_press_cfm"},
+    "permeability": Quantity({"unpressed": "permeability_cfm", "pressed": "permeability_press_cfm",
+                              "pressure": "pressure_permeability_press_cfm"},
                              "permeability_cfm", 1.0, "air permeability at 125 Pa (CFM)", "fig413-permeability"),
 }
 
@@ -146,11 +158,13 @@ def figure_series(data: dict[str, Any], sheets: list[Sheet], quantity: str, conv
                 else:
                     continue
                 rows.append((x, xsd, v["mean"] * q.scale, v["sd"] * q.scale, p["name"]))
-            out.append(_series(f"{section}, {state}", rows, section, state, (axis == "fibers", True)))
+            out.append(_series(f"{section}, {STATE_LABELS[state]}", rows, section, state, (axis == "fibers", True)))
     return [s for s in out if len(s.x)]
 
 
 _COLOURS: dict[str | None, str] = {"circular": "tab:blue", "rectangular": "tab:orange", None: "black"}
+_MARKERS: dict[State, str] = {"unpressed": "o", "pressed": "v", "pressure": "D"}
+_LINES: dict[State, str] = {"unpressed": "-", "pressed": "--", "pressure": "-."}
 _TITLES = {"direct": "direct: sheets' scaled masses (points S1-S7)",
            "sem": "SEM mapping: cases A-G at their mapped masses"}
 _XLABELS = {"mass": "injection mass on 3 x 3 mm (ug)", "fibers": "number of fibers (generated)"}
@@ -173,9 +187,9 @@ def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Fi
             for s in panel:
                 experiment = s.state is None
                 ax.errorbar(s.x, s.y, yerr=s.yerr, xerr=s.xerr, label=s.label, color=_COLOURS[s.section],
-                            marker="s" if experiment else ("o" if s.state == "unpressed" else "v"),
+                            marker="s" if s.state is None else _MARKERS[s.state],
                             mfc="none" if experiment and s.section else None,
-                            ls=":" if experiment and s.section else ("--" if s.state == "pressed" else "-"),
+                            ls=":" if experiment and s.section else ("-" if s.state is None else _LINES[s.state]),
                             capsize=3, lw=1.2)
             if not panel:
                 ax.text(0.5, 0.5, "no simulated points yet", transform=ax.transAxes, ha="center", color="grey")
@@ -185,7 +199,8 @@ def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Fi
             ax.grid(alpha=0.3)
             if panel:
                 ax.legend(fontsize=7)
-    fig.suptitle(f"{q.label}: experiment vs simulation (error bars: sd over seeds)", fontsize=11)
+    fig.suptitle(f"{q.label}: experiment vs simulation (error bars: sd over seeds){_pressure_note(data)}",
+                 fontsize=11)
     fig.tight_layout()
     return fig, drawn
 
@@ -203,6 +218,12 @@ def write_figure(data: dict[str, Any], sheets: list[Sheet], quantity: str,
     return drawn
 
 
+def _pressure_note(data: dict[str, Any]) -> str:
+    """``; pressed to pressure: 410 kPa`` when the JSON names the second press's pressure."""
+    pp = data.get("pressure_press") or {}
+    return f"; pressed to pressure: {pp['target_pressure_Pa'] / 1e3:g} kPa" if "target_pressure_Pa" in pp else ""
+
+
 def _num(v: float | None, digits: int) -> str:
     return "-" if v is None else f"{v:.{digits}f}"
 
@@ -216,23 +237,32 @@ def _stat(st: dict[str, float] | None, scale: float = 1.0) -> str:
 def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
     """Per section and state one table: per sheet the measured permeability, the simulated one and
     simulated / measured in the direct and the SEM convention (the JSON's ``sheets_unpressed`` /
-    ``sheets_pressed``), the measured and simulated thickness; ``-`` where not available."""
+    ``sheets_pressed`` / ``sheets_pressure``), the measured and simulated thickness; ``-`` where not
+    available."""
     summary: Summary = data.get("summary", {})
     sections = list(data.get("sheets_unpressed") or SECTIONS)
+    pp = data.get("pressure_press") or {}
+    second = (f"{pp['target_pressure_Pa'] / 1e3:g} kPa" if "target_pressure_Pa" in pp else "the campaign's pressure")
     lines = ["# Validation campaign: experimental sheets against the simulation", "",
              f"From `bench/thesis/run.py {data.get('command', '')}` (seeds: {data.get('seeds', '-')}). Permeability in CFM "
              "(cubic feet per square foot per minute) at 125 Pa, thickness in um, masses in ug on 3 x 3 mm. "
              "Simulated values: mean +- sd over seeds (n seeds). direct: sheet k against point Sk (its own "
              "scaled mass); SEM: the case points interpolated linearly at the sheet's mass (case B = sheet 2). "
              "Ratio: simulated / measured permeability. Simulated thickness: the 5-95 % span of node heights "
-             "+ one fiber width (pressed: at the end of the press).", ""]
+             "+ one fiber width (pressed: at the end of the press). States: unpressed (the laid-down sheet); "
+             "pressed to thickness (plate moved to the experimental thickness, or stopped by the overlap "
+             f"guard); pressed to pressure (the same laid-down sheet pressed to {second}, or as far as the "
+             "overlap guard allowed).", ""]
     if data.get("failures"):
         lines += ["Failed: " + "; ".join(f"{g}: {e}" for g, e in data["failures"].items()), ""]
+    if data.get("pending"):
+        lines += ["Pending (waiting for their lay-down): " + "; ".join(
+            f"{g}: {', '.join(v)}" for g, v in data["pending"].items()), ""]
     for section in sections:
         for state in STATES:
             rows = {r["sheet"]: r for r in data.get(f"sheets_{state}", {}).get(section, [])}
             thick = QUANTITIES["thickness"].metric[state]
-            lines += [f"## {section}, {state}", "",
+            lines += [f"## {section}, {STATE_LABELS[state]}", "",
                       "| sheet | mass (ug) | measured (CFM) | direct: simulated (CFM) | direct: ratio | "
                       "SEM: simulated (CFM) | SEM: ratio | measured thickness (um) | direct: thickness (um) | "
                       "SEM: thickness (um) |", "|" + "---|" * 10]
