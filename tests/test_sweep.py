@@ -74,3 +74,25 @@ def test_bad_sweep_exits_2_and_writes_nothing(tmp_path: Path, args: list[str], w
 def test_collect_without_a_sweep_exits_2(tmp_path: Path) -> None:
     r = _ff(tmp_path, "collect", "nowhere")
     assert r.returncode == 2 and "sweep.json" in r.stderr or "not found" in r.stderr, r.stderr
+
+
+FABRIC_SCENE = """name: swf
+run: {timestep_s: 1.0e-6, duration_s: 1.0e-3}
+fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3, voxel_size_m: 10.0e-6}
+flow: {cell_size_m: 50.0e-6, delta_p_Pa: 100.0}
+"""
+
+
+def test_sweep_from_checks_each_variants_own_upstream(tmp_path: Path) -> None:
+    """``sweep --from flow`` needs the fabric of each VARIANT (its own output folder), not of the
+    base scene, which a sweep never runs: with the variants' fabrics made it is accepted (nothing
+    is run with --no-run); a variant without one is refused (exit 2) naming its folder."""
+    (tmp_path / "s.yaml").write_text(FABRIC_SCENE)
+    r = _ff(tmp_path, "sweep", "s.yaml", "--seeds", "2", "--to", "fabric")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert not (tmp_path / "runs" / "swf").exists()  # the base scene's own folder: never run
+    r = _ff(tmp_path, "sweep", "s.yaml", "--seeds", "2", "--from", "flow", "--no-run")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    r = _ff(tmp_path, "sweep", "s.yaml", "--seeds", "3", "--from", "flow", "--no-run")
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "--from flow" in r.stderr and "swf_002" in r.stderr and "fabric" in r.stderr, r.stderr

@@ -19,7 +19,7 @@ from ._versions import build_dir, component_versions
 from .errors import ConfigError, FiberformError, SceneError, Terminated
 from .pipeline import StageGraph, applicable_stages, plan_run, run_pipeline
 from .provenance import atomic_write_text
-from .scene import SECTIONS, Scene, field_table, load_scene
+from .scene import SECTIONS, Scene, field_table, load_scene, parse_scene
 from .stages import STAGES, Stage, StageContext
 
 __all__ = ["main"]
@@ -203,7 +203,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     """Expand the scene into variants (--set values x --seeds), write them, run or submit them."""
-    from .sweep import expand, parse_set, run_sweep, submit_sweep, write_sweep
+    from .sweep import expand, parse_set, run_sweep, submit_sweep, variant_path, write_sweep
 
     opts = None
     if args.submit is not None:
@@ -219,9 +219,15 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     sets = [parse_set(t) for t in args.set or []]
     base = Path(args.scene)
     sweep_dir, variants = expand(base, sets, args.seeds, args.first_seed)
-    # --from/--to and the stage checks, before anything is written
+    # --from/--to and the stage checks, before anything is written; the upstream products that
+    # --from leaves out must exist in each variant's own output folder (not the base scene's)
     plan_run(StageContext(scene=load_scene(base), scene_path=base, build_dir=Path(args.build_dir)),
-             args.start, args.stop, None)
+             args.start, args.stop, None, require_upstream=False)
+    if args.start is not None and opts is None:
+        for v in variants:
+            plan_run(StageContext(scene=parse_scene(v.data, f"variant {v.name}"),
+                                  scene_path=variant_path(sweep_dir, v), build_dir=Path(args.build_dir)),
+                     args.start, args.stop, None)
     if opts is not None:
         return submit_sweep(opts, base, sweep_dir, variants, sets, Path(args.build_dir), args.start, args.stop,
                             dry_run=args.dry_run, echo=lambda line: print(line, flush=True))
