@@ -201,11 +201,11 @@ def _main() -> int:
         for r in rows:
             variants.append({"point": point, "section": section, "ranks": ranks, **r})
     summary = cp.summarise(collected)
-    ratios = {s: cp.sheet_ratios(c, sheets, pts, summary, s) for s in sections}  # type: ignore[arg-type]
-    ratios_pressed = {s: cp.sheet_ratios(c, sheets, pts, summary, s, "permeability_press_cfm")
-                      for s in sections}  # type: ignore[arg-type]
-    ratios_pressure = {s: cp.sheet_ratios(c, sheets, pts, summary, s, "pressure_permeability_press_cfm")
-                       for s in sections}  # type: ignore[arg-type]
+    # per state (unpressed, pressed, pressure) the per-sheet ratios of its permeability metric, under
+    # the key the report reads them from
+    ratios = {f"sheets_{state}": {s: cp.sheet_ratios(c, sheets, pts, summary, s, metric)  # type: ignore[arg-type]
+                                  for s in sections}
+              for state, metric in campaign_report.QUANTITIES["permeability"].metric.items()}
     out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
     cp.write_json(out, {
         "campaign": str(args.campaign),
@@ -214,8 +214,7 @@ def _main() -> int:
                     "press_target_m": p.press_target_m} for p in chosen],
         "pressure_press": None if c.pressure_press is None else c.pressure_press.model_dump(),
         "wall_s": time.monotonic() - t_start, "failures": failures, "pending": pending, "variants": variants,
-        "summary": summary, "sheets_unpressed": ratios, "sheets_pressed": ratios_pressed,
-        "sheets_pressure": ratios_pressure})
+        "summary": summary, **ratios})
     print(f"wrote {out}")
     for path in campaign_report.write_report(json.loads(out.read_text()), sheets, out):
         print(f"wrote {path}")
