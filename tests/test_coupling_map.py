@@ -4,8 +4,10 @@ without binaries: a lattice graded in z with removed (yarn) cells, the fluid cel
 shuffled order as an OpenFOAM mesh after subsetMesh lists them.
 
 - frozen-flow equivalence: the map's sampling of the fluid cell velocities equals the flow stage's
-  own resampling onto flow.grid (fiberform.stages.flow.sample_grid, scipy's
-  RegularGridInterpolator) to 1e-12 relative;
+  own resampling onto flow.grid (fiberform.stages.flow.sample_grid; both use
+  fiberform.lattice.trilinear_stencil) to 1e-12 relative, and both equal scipy's
+  RegularGridInterpolator (linear, points clamped to the lattice's box: an independent
+  implementation) to 1e-12 relative, velocity and fluid-weighted pressure;
 - reaction: every exchange cell hands its force to one fluid cell, the one whose lattice box
   contains the exchange cell's centre (checked by brute force over the boxes), or, for a centre in a
   removed cell, the fluid cell with the nearest centre; the sum over fluid cells equals the sum over
@@ -14,6 +16,7 @@ shuffled order as an OpenFOAM mesh after subsetMesh lists them.
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import sys
 from pathlib import Path
@@ -21,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from scipy.interpolate import RegularGridInterpolator
 
 from fiberform.coupling_map import ExchangeGrid, exchange_map, write_exchange_map
 from fiberform.errors import SceneError
@@ -69,8 +73,24 @@ def test_map_sampling_equals_flow_grid_and_reaction_is_conservative(tmp_path: Pa
                      solid_fraction=np.zeros(shape, np.float32), q_top_m3_s=0.0, q_bottom_m3_s=0.0,
                      iterations=0, converged=True, fluid_cells=len(C), lattice_cells=U.size // 3,
                      wall_times_s={}, final_residuals={})  # fmt: skip
-    g, Ug, _ = sample_grid(res, s)
+    pres = rng.normal(size=shape)
+    pres[~fluid] = np.nan
+    res = dataclasses.replace(res, p=pres)
+    g, Ug, pg = sample_grid(res, s)
     grid = ExchangeGrid(g.origin, g.spacing, g.shape)
+
+    # the resampling against scipy's trilinear interpolation (clamped to the lattice centres' box)
+    axes = (lx, ly, lz)
+    Q = np.stack(np.meshgrid(*(np.clip(g.axis(a), axes[a][0], axes[a][-1]) for a in range(3)),
+                             indexing="ij"), axis=-1).reshape(-1, 3)
+    U_ref = np.stack([RegularGridInterpolator(axes, U[..., c])(Q) for c in range(3)], axis=1)
+    assert np.max(np.abs(Ug.reshape(-1, 3) - U_ref)) <= 1e-12 * np.max(np.abs(U_ref))
+    wf = RegularGridInterpolator(axes, fluid.astype(float))(Q)
+    wet = wf > 0
+    assert 0 < np.count_nonzero(~wet) < wet.size  # nodes inside the removed cells too
+    p_ref = RegularGridInterpolator(axes, np.where(fluid, pres, 0.0))(Q)[wet] / wf[wet]
+    assert np.max(np.abs(pg.reshape(-1)[wet] - p_ref)) <= 1e-12 * np.max(np.abs(p_ref))
+    assert np.all(np.isnan(pg.reshape(-1)[~wet]))
     cells, weights, target = exchange_map(grid, (lx, ly, lz), C)
 
     # frozen-flow equivalence: sum of w U_cell over the stencil = the flow stage's flow.grid values

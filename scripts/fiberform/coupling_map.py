@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from .lattice import trilinear_stencil
 from .openfoam_case import _nearest_layer
 
 __all__ = ["MAP_NAME", "ExchangeGrid", "exchange_map", "write_exchange_map"]
@@ -54,14 +55,6 @@ def _faces(centres: FloatArray, lo: float) -> FloatArray:
     return f
 
 
-def _interval(axis: FloatArray, x: FloatArray) -> tuple[IntArray, FloatArray]:
-    """Lower lattice index and weight of the upper one of points x already inside [axis0, axis-1]."""
-    if len(axis) < 2:
-        return np.zeros(len(x), np.int64), np.zeros(len(x))
-    i = np.clip(np.searchsorted(axis, x, side="right") - 1, 0, len(axis) - 2)
-    return i.astype(np.int64), (x - axis[i]) / (axis[i + 1] - axis[i])
-
-
 def exchange_map(grid: ExchangeGrid, lattice: tuple[FloatArray, FloatArray, FloatArray],
                  cell_centres: FloatArray) -> tuple[IntArray, FloatArray, IntArray]:
     """(stencil cells (n, 8), stencil weights (n, 8), receiving cell (n,)) of the exchange cells of
@@ -76,26 +69,11 @@ def exchange_map(grid: ExchangeGrid, lattice: tuple[FloatArray, FloatArray, Floa
     cell_of[tuple(idx)] = np.arange(len(cell_centres))
     P = grid.centres()
     # sampling: the flow stage's trilinear resampling (centres clamped to the lattice centres' box)
-    lo_w = []
-    for a, ax in enumerate((lx, ly, lz)):
-        lo_w.append(_interval(ax, np.clip(P[:, a], ax[0], ax[-1])))
-    cells = np.full((len(P), 8), -1, dtype=np.int64)
-    weights = np.zeros((len(P), 8))
-    s = 0
-    for di in (0, 1):
-        for dj in (0, 1):
-            for dk in (0, 1):
-                w = np.ones(len(P))
-                ijk = []
-                for a, d in enumerate((di, dj, dk)):
-                    i0, t = lo_w[a]
-                    w = w * (t if d else 1.0 - t)
-                    ijk.append(np.minimum(i0 + d, shape[a] - 1))
-                c = cell_of[tuple(ijk)]
-                keep = (c >= 0) & (w > 0.0)
-                cells[keep, s] = c[keep]
-                weights[keep, s] = w[keep]
-                s += 1
+    idx, w = trilinear_stencil((lx, ly, lz), P)
+    c = cell_of[idx[..., 0], idx[..., 1], idx[..., 2]]
+    keep = (c >= 0) & (w > 0.0)
+    cells = np.where(keep, c, -1)
+    weights = np.where(keep, w, 0.0)
     # reaction: the fluid cell containing the exchange cell's centre, else the nearest fluid cell
     owner = []
     for a, ax in enumerate((lx, ly, lz)):

@@ -44,6 +44,7 @@ import numpy.typing as npt
 
 from ..errors import StageError
 from ..fabric_geometry import VoxelImage
+from ..lattice import trilinear_stencil
 from ..openfoam_case import (
     BoxSetup, CaseResult, Lattice, SolidFraction, collect_case, load_prepared, plot_section,
     prepare_or_resume, run_case, solver_program, solver_wall_time, template_hash, write_solver_record,
@@ -156,26 +157,24 @@ class RegularGrid:
 def sample_grid(res: FlowResult, s: FlowSetup) -> tuple[RegularGrid, FloatArray, FloatArray]:
     """Trilinear resampling of the lattice values onto a regular node grid covering the domain
     (nodes at cell-centre positions (i + 1/2) * spacing; positions outside the outermost lattice
-    centres take the boundary values). Returns (grid, U (nx, ny, nz, 3), p (nx, ny, nz))."""
-    from scipy.interpolate import RegularGridInterpolator
-
+    centres take the boundary values; :func:`fiberform.lattice.trilinear_stencil`, the stencil the
+    two-way coupling samples the live fluid with). The pressure is the fluid-weighted average
+    (removed cells do not count; NaN where no fluid cell contributes). Returns (grid,
+    U (nx, ny, nz, 3), p (nx, ny, nz))."""
     h = s.sample_spacing_m or s.cell_size_m
     ext = np.array([s.size_x_m, s.size_y_m, s.top_z_m])
     n = np.maximum(1, np.round(ext / h)).astype(int)
     sp = ext / n
     grid = RegularGrid(0.5 * sp, sp, (int(n[0]), int(n[1]), int(n[2])))
     axes = (res.lattice_x, res.lattice_y, res.lattice_z)
-    pts = [np.clip(grid.axis(a), axes[a][0], axes[a][-1]) for a in range(3)]
-    P = np.stack(np.meshgrid(*pts, indexing="ij"), axis=-1).reshape(-1, 3)
-    U = np.empty((P.shape[0], 3))
-    for c in range(3):
-        itp = RegularGridInterpolator(axes, res.U[..., c], method="linear")
-        U[:, c] = itp(P)
-    p_filled = np.where(np.isnan(res.p), 0.0, res.p)
-    w = RegularGridInterpolator(axes, res.fluid.astype(np.float64), method="linear")(P)
-    pv = RegularGridInterpolator(axes, p_filled, method="linear")(P)
+    P = np.stack(np.meshgrid(*(grid.axis(a) for a in range(3)), indexing="ij"), axis=-1).reshape(-1, 3)
+    idx, w = trilinear_stencil(axes, P)
+    at = (idx[..., 0], idx[..., 1], idx[..., 2])
+    U = np.einsum("ns,nsc->nc", w, res.U[at])
+    wf = np.sum(w * res.fluid[at], axis=1)
+    pv = np.sum(w * np.where(np.isnan(res.p), 0.0, res.p)[at], axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        p = np.where(w > 0, pv / np.maximum(w, 1e-300), np.nan)  # fluid-weighted average
+        p = np.where(wf > 0, pv / np.maximum(wf, 1e-300), np.nan)  # fluid-weighted average
     return grid, U.reshape(*grid.shape, 3), p.reshape(grid.shape)
 
 
