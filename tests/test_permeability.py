@@ -3,8 +3,9 @@
 
 Quick (no OpenFOAM): the solid fraction of a cylinder sampled on the lattice against pi a^2, the
 flow-rate convergence criterion against a sinusoid, the Tomadakis-Sotirchos law against a value
-evaluated by hand, the product paths of the readers against the producing stages, bad
-``permeability`` sections (exit status 2 naming the field, nothing written).
+evaluated by hand, the product paths of the readers against the producing stages, the fabric cut
+into the same zone layers (and yarn cells) under every sheet, bad ``permeability`` sections (exit
+status 2 naming the field, nothing written).
 
 System (stock simpleFoam): a square array of cylinders in transverse Stokes flow through the same
 box case, capsule rasterisation and cell removal as the stage; the permeability k / a^2 measured
@@ -251,6 +252,47 @@ def test_reader_paths_match_the_stages() -> None:
         assert path == Path(st.folder) / st.products[0], stage
     assert "permeability" in STAGES
     assert CFM_M_S == pytest.approx(5.08e-3, rel=1e-12)
+
+
+def test_fabric_cells_do_not_depend_on_the_sheet_top() -> None:
+    """The default fabric (lower side 2 mm, 3 x 110 + 130 + 177 um = 637 um thick) in 100 um
+    sub-grid cells is cut into round(6.37) = 6 layers of 637/6 um under the bare fabric (as the
+    flow stage cuts it), under a sheet whose top is 15.8 um above the fabric (one more layer) and
+    under one just at its top, with the same yarn cells removed: the tiny campaign's unpressed and
+    pressed sheets (these two tops) were run on zones of 7 x 93.3 and 6 x 106.2 um, whose blocky
+    fabrics alone passed 722 and 1110-1190 CFM, so the pressed sheet came out more permeable."""
+    from fiberform.fabric_geometry import build_weave
+    from fiberform.openfoam_case import volume_preserving
+    from fiberform.scene import FabricSection, PermeabilitySection
+    from fiberform.stages.permeability import PermeabilityGeometry, case_setup, solid_fraction
+
+    fab = FabricSection()
+    thick = 3 * 0.11e-3 + 0.13e-3 + 0.177e-3
+    top = 2.0e-3 + thick
+    assert fab.top_z_m == pytest.approx(top, abs=1e-9)
+    yarns = tuple(Chain(y.points, y.radius) for y in build_weave(fab.weave()))
+    perm = PermeabilitySection(mode="subgrid", subgrid_cell_size_m=100e-6)
+    flow = make_lattice(BoxSetup(size_x_m=1e-3, size_y_m=1e-3, fabric_lo_z_m=2e-3, fabric_hi_z_m=top,
+                                 top_z_m=top + 0.5e-3, cell_size_m=100e-6, max_cell_height_m=800e-6,
+                                 delta_p_Pa=125.0, density_kg_m3=1.2, viscosity_Pa_s=1.8e-5))
+    removed = {}
+    for sheet_top, layers in ((None, 6), (top + 15.8e-6, 7), (top + 0.07e-6, 7), (top - 10e-6, 6)):
+        geo = PermeabilityGeometry(1e-3, 1e-3, 2e-3, top if sheet_top is None else max(top, sheet_top),
+                                   20e-6, yarns, fabric_top_z_m=top)
+        s = case_setup(perm, geo)
+        lat = make_lattice(s)
+        assert (lat.nx, lat.ny, lat.n_fabric) == (10, 10, layers), sheet_top
+        assert (s.fabric_hi_z_m - s.fabric_lo_z_m) / lat.n_fabric == pytest.approx(thick / 6, rel=1e-12)
+        assert s.top_z_m == pytest.approx(2e-3 + layers * thick / 6 + perm.height_above_m, rel=1e-12)
+        if sheet_top is None:
+            assert (flow.n_fabric, flow.n_below, flow.n_above) == (lat.n_fabric, lat.n_below, lat.n_above)
+        cells = volume_preserving(solid_fraction(geo, perm)(s, lat))
+        assert not cells[:, :, 6:].any()  # the layer above the fabric holds no yarn
+        removed[sheet_top] = cells[:, :, :6]
+    first = removed[None]
+    assert first.sum() > 100  # the yarns fill about a quarter of the fabric's layers
+    for k, cells in removed.items():
+        assert np.array_equal(cells, first), k
 
 
 @pytest.mark.parametrize("bad,field", [

@@ -8,15 +8,15 @@ vertical sides, kinematic pressure delta_p / rho at the top and 0 at the bottom 
 velocity there, no-slip on the solid (wall patch ``yarns``). Solver: stock ``simpleFoam``
 (laminar steady Navier-Stokes, SIMPLEC), optionally on several ranks through ``decomposePar``.
 
-Mesh: ``blockMesh`` builds a box of three blocks stacked in z; the zone has cubic cells of
-``cell_size_m``, the blocks above and below are graded geometrically up to ``max_cell_height_m``. The
-caller supplies the solid volume fraction of each zone cell (a :data:`SolidFraction` callback);
-the cells to remove are those with fraction >= 1/2 or, with ``preserve_volume`` (both stages), the
-ones :func:`volume_preserving` picks; ``topoSet`` selects the others that are face-connected to the
-top and
-``subsetMesh`` keeps only those, turning the exposed faces into the wall patch ``yarns`` (a
-"staircase" wall; the resolution trade is measured in docs/bench/flow.md and
-docs/stages/permeability.md).
+Mesh: ``blockMesh`` builds a box of three blocks stacked in z; the zone has cells of
+``cell_size_m`` (in z: the zone height over ``zone_layers``, or over the whole number of cells
+nearest to height / ``cell_size_m``), the blocks above and below are graded geometrically up to
+``max_cell_height_m``. The caller supplies the solid volume fraction of each zone cell (a
+:data:`SolidFraction` callback); the cells to remove are those with fraction >= 1/2 or, with
+``preserve_volume`` (both stages), the ones :func:`volume_preserving` picks; ``topoSet`` selects
+the others that are face-connected to the top and ``subsetMesh`` keeps only those, turning the
+exposed faces into the wall patch ``yarns`` (a "staircase" wall; the resolution trade is measured
+in docs/bench/flow.md and docs/stages/permeability.md).
 
 The case template is ``openfoam-cases/fabric-flow``; every value that changes is written through
 foamlib from validated numbers (no text from a scene reaches a case file).
@@ -114,6 +114,9 @@ class BoxSetup:
     max_iterations: int = 3000
     residual_tolerance: float = 1e-6
     ranks: int = 1
+    #: cell layers of the zone (None: its height / cell_size_m, rounded); the permeability stage
+    #: sets it so that a fabric is cut into the same layers under every sheet
+    zone_layers: int | None = None
 
 
 def geometric_cells(length: float, first: float, largest: float) -> tuple[int, float]:
@@ -167,7 +170,7 @@ def make_lattice(s: BoxSetup) -> Lattice:
     h = s.cell_size_m
     nx = max(1, round(s.size_x_m / h))
     ny = max(1, round(s.size_y_m / h))
-    nf = max(1, round((s.fabric_hi_z_m - s.fabric_lo_z_m) / h))
+    nf = s.zone_layers or max(1, round((s.fabric_hi_z_m - s.fabric_lo_z_m) / h))
     hz = (s.fabric_hi_z_m - s.fabric_lo_z_m) / nf
     nb, eb = geometric_cells(s.fabric_lo_z_m, hz, s.max_cell_height_m)
     na, ea = geometric_cells(s.top_z_m - s.fabric_hi_z_m, hz, s.max_cell_height_m)

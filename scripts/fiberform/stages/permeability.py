@@ -70,7 +70,7 @@ from ._stage import Program, Stage, StageContext, resumes
 __all__ = [
     "Forchheimer", "PermeabilityGeometry", "PermeabilityStage", "case_setup",
     "darcy_permeability", "fiber_resistance", "forchheimer_setup", "law_radius",
-    "nominal_fiber_section", "nominal_fiber_thickness", "solid_fraction",
+    "nominal_fiber_section", "nominal_fiber_thickness", "solid_fraction", "zone_layers",
 ]
 
 H5_NAME, REPORT_NAME, PNG_NAME = "permeability.h5", "report.md", "permeability.png"
@@ -93,6 +93,7 @@ class PermeabilityGeometry:
     fiber_chains: tuple[Chain, ...] = ()
     image: object | None = None  # VoxelImage of an imported fabric (no yarn chains)
     law_radius_m: float | None = None  # sub-grid law's fiber radius (None: thinnest_m / 2)
+    fabric_top_z_m: float | None = None  # the fabric's top (None: upper_z_m, no sheet above it)
 
     @property
     def fibers(self) -> int:
@@ -126,19 +127,35 @@ def law_radius(c: Chain) -> float:
     return c.radius if c.half_thickness is None else hydraulic_radius(c.radius, c.half_thickness)
 
 
+def zone_layers(geo: PermeabilityGeometry, h: float) -> tuple[int, float]:
+    """(cell layers, upper end [m]) of the solid zone for cells of about ``h``: the fabric (lower
+    side to top) in the whole number of layers nearest to its height / h, as the flow stage cuts
+    it, and as many more layers of that height as reach the highest solid point. A fabric is so
+    cut into the same cells under every sheet: the permeabilities of a sheet before and after the
+    press, and of the bare fabric, differ by the fibers only (before, every cell boundary in the
+    fabric moved with the sheet's top: docs/stages/permeability.md, "Zone layers")."""
+    fabric_top = geo.upper_z_m if geo.fabric_top_z_m is None else geo.fabric_top_z_m
+    n = max(1, round((fabric_top - geo.lower_z_m) / h))
+    hz = (fabric_top - geo.lower_z_m) / n
+    n += max(0, math.ceil((geo.upper_z_m - fabric_top) / hz - 1e-9))
+    return n, geo.lower_z_m + n * hz
+
+
 def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup:
     """The box case of a permeability run: zone cells of thinnest / cells_across_fiber (resolved)
-    or subgrid_cell_size_m (subgrid)."""
+    or subgrid_cell_size_m (subgrid), in the layers of :func:`zone_layers`; the domain's top
+    ``height_above_m`` above the zone."""
     if perm.mode == "subgrid":
         h = perm.subgrid_cell_size_m
     else:
         h = geo.thinnest_m / perm.cells_across_fiber
+    layers, zone_top = zone_layers(geo, h)
     return BoxSetup(
         size_x_m=geo.size_x_m,
         size_y_m=geo.size_y_m,
         fabric_lo_z_m=geo.lower_z_m,
-        fabric_hi_z_m=geo.upper_z_m,
-        top_z_m=geo.upper_z_m + perm.height_above_m,
+        fabric_hi_z_m=zone_top,
+        top_z_m=zone_top + perm.height_above_m,
         cell_size_m=h,
         max_cell_height_m=perm.max_cell_height_m or 8.0 * h,
         delta_p_Pa=perm.pressure_drop_Pa,
@@ -147,6 +164,7 @@ def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup
         max_iterations=perm.max_iterations,
         residual_tolerance=perm.residual_tolerance,
         ranks=perm.ranks,
+        zone_layers=layers,
     )
 
 
@@ -210,7 +228,7 @@ class PermeabilityStage(Stage):
     requires = ("fabric", "permeability")
     uses = ("fabric", "fibers", "laydown", "permeability")
     products = (H5_NAME, REPORT_NAME, PNG_NAME)
-    code_version = 2
+    code_version = 3  # 3: the fabric's zone layers independent of the sheet (zone_layers)
     splits = True
 
     #: the sheet this stage puts on the fabric (a product with /sheet/x, fiber_id, offsets)
@@ -322,6 +340,7 @@ class PermeabilityStage(Stage):
             fiber_chains=tuple(fibers),
             image=None if yarns else img,
             law_radius_m=min(law_radius(c) for c in fibers) if fibers else None,
+            fabric_top_z_m=float(up[2]),
         )
 
     def cases(self, ctx: StageContext) -> tuple[PermeabilityGeometry, list[tuple[BoxSetup, Path]]]:
