@@ -203,27 +203,37 @@ def test_pressure_scene_differs_from_the_point_only_in_press(
 
 def test_pressure_rows_join_by_seed(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
     """The pressure press's collect rows join the point's by seed as pressure_<column>; a row of
-    another sheet (a differing lay-down column) is refused; statistics and ratios follow."""
+    another sheet (a differing lay-down column, also the thickness above the fabric) is refused;
+    statistics and ratios follow."""
     c, sheets, pts = setup
-    sheet = {"fibers": "40", "sheet_thickness_m": "2.5e-04", "permeability_cfm": "600", "laydown_wall_s": "90.5"}
+    sheet = {"fibers": "40", "sheet_thickness_m": "2.5e-04", "sheet_thickness_above_fabric_m": "6e-05",
+             "permeability_cfm": "600", "laydown_wall_s": "90.5"}
     point = [{"seed": "1", **sheet, "permeability_press_cfm": "550", "press_wall_s": "10"},
              {"seed": "2", **sheet, "permeability_press_cfm": "530"},
-             {"seed": "3", **sheet}]
+             {"seed": "3", **sheet}, {"seed": "4", **sheet}]
     pressure = [{"seed": "2", **sheet, "permeability_press_cfm": "400", "pressed_span_thickness_m": "5e-05",
-                 "press_max_pressure_Pa": "12.5", "permeability-press_wall_s": "20"},
-                {"seed": "1", **sheet, "permeability_press_cfm": "420", "pressed_span_thickness_m": "7e-05"},
-                {"seed": "3", **{**sheet, "laydown_wall_s": "91.0"}, "permeability_press_cfm": "1"}]
+                 "pressed_thickness_above_fabric_m": "3e-05", "press_max_pressure_Pa": "12.5",
+                 "permeability-press_wall_s": "20"},
+                {"seed": "1", **sheet, "permeability_press_cfm": "420", "pressed_span_thickness_m": "7e-05",
+                 "pressed_thickness_above_fabric_m": "4e-05"},
+                {"seed": "3", **{**sheet, "laydown_wall_s": "91.0"}, "permeability_press_cfm": "1"},
+                {"seed": "4", **{**sheet, "sheet_thickness_above_fabric_m": "6.1e-05"}, "permeability_press_cfm": "2"}]
     rows, problems = cp.merge_pressure(point, pressure)
     assert rows[0]["pressure_permeability_press_cfm"] == "420" and rows[0]["permeability_press_cfm"] == "550"
     assert rows[1]["pressure_press_max_pressure_Pa"] == "12.5" and rows[1]["pressure_permeability-press_wall_s"] == "20"
     assert rows[0]["press_wall_s"] == "10" and "pressure_press_wall_s" not in rows[0]
+    assert rows[1]["pressure_pressed_thickness_above_fabric_m"] == "3e-05"
     assert not any(k.startswith("pressure_") for k in rows[2])  # seed 3: another lay-down
-    assert len(problems) == 1 and "seed 3" in problems[0] and "laydown_wall_s" in problems[0]
+    assert not any(k.startswith("pressure_") for k in rows[3])  # seed 4: another sheet above the fabric
+    assert len(problems) == 2 and "seed 3" in problems[0] and "laydown_wall_s" in problems[0]
+    assert "seed 4" in problems[1] and "press's sheet_thickness_above_fabric_m differ" in problems[1]
     assert cp.merge_pressure(point, []) == (point, [])
     s = cp.summarise({"S2-circular": rows})
     assert s["S2-circular"]["pressure_permeability_press_cfm"] == {"mean": 410.0, "sd": statistics.stdev([420, 400]),
                                                                   "n": 2.0}
     assert s["S2-circular"]["pressure_pressed_span_thickness_m"]["mean"] == pytest.approx(6e-5)
+    assert s["S2-circular"]["pressure_pressed_thickness_above_fabric_m"]["mean"] == pytest.approx(3.5e-5)
+    assert s["S2-circular"]["sheet_thickness_above_fabric_m"] == {"mean": 6e-5, "sd": 0.0, "n": 4.0}
     assert s["S2-circular"]["permeability_press_cfm"]["mean"] == 540.0
     r = {x["sheet"]: x for x in cp.sheet_ratios(c, sheets, pts, s, "circular", "pressure_permeability_press_cfm")}
     assert r[2]["direct"]["ratio"] == pytest.approx(410.0 / 255.0)
@@ -310,6 +320,10 @@ def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path
     # every stage ran: the lay-down, both permeabilities and the press report their numbers
     for key in ("sheet_thickness_m", "permeability_cfm", "press_plate_gap_m", "permeability_press_cfm"):
         assert float(v[key]) > 0.0, key
+    # thicknesses above the fabric top (collected; the report compares these): the pressed sheet's
+    # highest surfaces lie at most the overlap guard's 0.2 x 20 um (+ radius jitter) above the plate
+    assert 0.0 <= float(v["pressed_thickness_above_fabric_m"]) <= float(v["press_plate_gap_m"]) + 5e-6
+    assert float(v["sheet_thickness_above_fabric_m"]) >= 0.0 and "pressure_pressed_thickness_above_fabric_m" in v
     assert float(v["fiber_mass_kg"]) >= 2.2e-9
     stats = res["summary"]["A-circular"]
     assert stats["permeability_cfm"]["n"] == 1.0

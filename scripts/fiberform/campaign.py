@@ -314,20 +314,21 @@ def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_
 # -- results ---------------------------------------------------------------------------------------
 
 #: the collect.csv columns of the press and the pressed permeability (prefix ``pressure_`` for
-#: the second press, :func:`merge_pressure`)
+#: the second press, :func:`merge_pressure`); thicknesses: the pressed sheet's above the fabric
+#: top (compared with the experiments, fiber_sheet.thickness_above_fabric) and its 5-95 % span
 PRESS_METRICS = ("press_plate_gap_m", "press_max_pressure_Pa", "press_stopped_by_guard",
-                 "pressed_span_thickness_m", "permeability_press_cfm", "press_wall_s",
-                 "permeability-press_wall_s")
+                 "pressed_span_thickness_m", "pressed_thickness_above_fabric_m", "permeability_press_cfm",
+                 "press_wall_s", "permeability-press_wall_s")
 #: the collect.csv columns the campaign reports (SI units in the names)
 METRICS = ("fibers", "fiber_mass_kg", "settled", "laydown_simulated_time_s", "sheet_thickness_m",
-           "grammage_kg_m2", "permeability_cfm", *PRESS_METRICS, "laydown_wall_s", "permeability_wall_s",
-           *(f"pressure_{m}" for m in PRESS_METRICS))
+           "sheet_thickness_above_fabric_m", "grammage_kg_m2", "permeability_cfm", *PRESS_METRICS,
+           "laydown_wall_s", "permeability_wall_s", *(f"pressure_{m}" for m in PRESS_METRICS))
 #: columns of the stages after the lay-down that a pressure-press row adds to the point's row
 _PRESS_COLUMNS = ("press_", "pressed_", "permeability_press_", "permeability-press_")
 #: columns that must agree between a point's row and its pressure-press row (the same sheet,
 #: copied: the wall times are those recorded in the copied products)
-SAME_SHEET = ("fibers", "fiber_mass_kg", "sheet_thickness_m", "grammage_kg_m2", "permeability_cfm",
-              "laydown_wall_s", "permeability_wall_s")
+SAME_SHEET = ("fibers", "fiber_mass_kg", "sheet_thickness_m", "sheet_thickness_above_fabric_m",
+              "grammage_kg_m2", "permeability_cfm", "laydown_wall_s", "permeability_wall_s")
 
 
 def merge_pressure(rows: list[dict[str, str]], pressure_rows: list[dict[str, str]]) -> tuple[list[dict[str, str]], list[str]]:

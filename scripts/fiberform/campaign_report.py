@@ -19,9 +19,17 @@ dict and the experiments (``campaign.read_experiments``) into
 
 States (:data:`STATES`, their labels :data:`STATE_LABELS`): ``unpressed`` (the lay-down's sheet),
 ``pressed`` (the campaign's velocity-controlled press to the experimental thickness; JSON
-``sheets_pressed``, metrics ``permeability_press_cfm``, ``pressed_span_thickness_m``) and
+``sheets_pressed``, metrics ``permeability_press_cfm``, ``pressed_thickness_above_fabric_m``) and
 ``pressure`` (the second press, pressure-controlled, of the same sheet; JSON ``sheets_pressure``,
-metrics ``pressure_permeability_press_cfm``, ``pressure_pressed_span_thickness_m``).
+metrics ``pressure_permeability_press_cfm``, ``pressure_pressed_thickness_above_fabric_m``); the
+unpressed thickness is ``sheet_thickness_above_fabric_m``.
+
+The simulated thickness compared with the experiments is the sheet's thickness above the fabric
+top (``fiberform.fiber_sheet.thickness_above_fabric``: the 95th percentile of the fibers' upper
+surfaces minus the fabric top, at least 0), as the experiments measure a sheet on its fabric
+(sheet 1: 0 um). The 5-95 % node span + one width (``sheet_thickness_m``,
+``pressed_span_thickness_m``), which counts the fibers hanging into the fabric's openings, stays in
+the JSON but is not plotted.
 
 Points without data are left out (figures) or shown as ``-`` (tables); an empty campaign gives
 the experiments alone.
@@ -67,12 +75,16 @@ class Quantity:
     scale: float  # SI -> plotted unit
     label: str
     file_tag: str
+    definition: str = ""  # what the simulated value is (figure title, table text)
 
 
 QUANTITIES = {
-    "thickness": Quantity({"unpressed": "sheet_thickness_m", "pressed": "pressed_span_thickness_m",
-                           "pressure": "pressure_pressed_span_thickness_m"},
-                          "thickness_m", 1e6, "sheet thickness (um)", "fig412-thickness"),
+    "thickness": Quantity({"unpressed": "sheet_thickness_above_fabric_m",
+                           "pressed": "pressed_thickness_above_fabric_m",
+                           "pressure": "pressure_pressed_thickness_above_fabric_m"},
+                          "thickness_m", 1e6, "thickness above the fabric top (um)", "fig412-thickness",
+                          "simulated: 95th percentile of the fibers' upper surfaces minus the fabric top "
+                          "(not the 5-95 % node span)"),
     "permeability": Quantity({"unpressed": "permeability_cfm", "pressed": "permeability_press_cfm",
                               "pressure": "pressure_permeability_press_cfm"},
                              "permeability_cfm", 1.0, "air permeability at 125 Pa (CFM)", "fig413-permeability"),
@@ -199,8 +211,8 @@ def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Fi
             ax.grid(alpha=0.3)
             if panel:
                 ax.legend(fontsize=7)
-    fig.suptitle(f"{q.label}: experiment vs simulation (error bars: sd over seeds){_pressure_note(data)}",
-                 fontsize=11)
+    fig.suptitle(f"{q.label}: experiment vs simulation (error bars: sd over seeds){_pressure_note(data)}"
+                 + (f"\n{q.definition}" if q.definition else ""), fontsize=11)
     fig.tight_layout()
     return fig, drawn
 
@@ -248,8 +260,10 @@ def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
              "(cubic feet per square foot per minute) at 125 Pa, thickness in um, masses in ug on 3 x 3 mm. "
              "Simulated values: mean +- sd over seeds (n seeds). direct: sheet k against point Sk (its own "
              "scaled mass); SEM: the case points interpolated linearly at the sheet's mass (case B = sheet 2). "
-             "Ratio: simulated / measured permeability. Simulated thickness: the 5-95 % span of node heights "
-             "+ one fiber width (pressed: at the end of the press). States: unpressed (the laid-down sheet); "
+             "Ratio: simulated / measured permeability. Simulated thickness: thickness above the fabric top, "
+             "95th percentile of the fibers' upper surfaces minus the fabric top, at least 0 (pressed: at the "
+             "end of the press; the 5-95 % span of node heights + one width, which counts fibers hanging into "
+             "the fabric's openings, is in the JSON only). States: unpressed (the laid-down sheet); "
              "pressed to thickness (plate moved to the experimental thickness, or stopped by the overlap "
              f"guard); pressed to pressure (the same laid-down sheet pressed to {second}, or as far as the "
              "overlap guard allowed).", ""]
@@ -264,8 +278,8 @@ def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
             thick = QUANTITIES["thickness"].metric[state]
             lines += [f"## {section}, {STATE_LABELS[state]}", "",
                       "| sheet | mass (ug) | measured (CFM) | direct: simulated (CFM) | direct: ratio | "
-                      "SEM: simulated (CFM) | SEM: ratio | measured thickness (um) | direct: thickness (um) | "
-                      "SEM: thickness (um) |", "|" + "---|" * 10]
+                      "SEM: simulated (CFM) | SEM: ratio | measured thickness (um) | direct: thickness above "
+                      "fabric (um) | SEM: thickness above fabric (um) |", "|" + "---|" * 10]
             for s in sheets:
                 r = rows.get(s.sheet, {})
                 d, sem = r.get("direct"), r.get("sem")

@@ -1,14 +1,15 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Shared machinery of the stages that simulate the sheet of fibers on the fabric in LIGGGHTS
 (``laydown``, ``press``): the contact commands (yarns, side planes, fiber-fiber pair style), the
-yarn file, the sheet's geometric measures (gaps, clearances, thickness, solid fraction) and its
-pictures. Stages import this module, never each other (docs/stages/pipeline.md).
+yarn file, the sheet's geometric measures (gaps, clearances, thickness, thickness above the
+fabric, solid fraction) and its pictures. Stages import this module, never each other
+(docs/stages/pipeline.md).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,9 @@ import numpy.typing as npt
 
 from .fabric_geometry import segment_distances
 from .inputs import STAR, LiggghtsInput, file_token, ident_list
-from .products import Yarns, read_yarns
+from .products import (
+    FIBERS_H5, Chain, Yarns, read_fiber_outer_axes, read_sheet_chains, read_yarns, sheet_chains,
+)
 from .scene import Scene
 
 Array = npt.NDArray[np.float64]
@@ -267,6 +270,54 @@ def sheet_thickness(z: Array, diameter: float) -> float:
     if len(z) == 0:
         return 0.0
     return float(np.percentile(z, 95) - np.percentile(z, 5) + diameter)
+
+
+def upper_surfaces(chains: Sequence[Chain]) -> Array:
+    """Height of the fibers' upper surface above each node, m: the node's z plus half its fiber's
+    thickness (:attr:`Chain.thickness`: the diameter of a circular section, the thickness of a
+    collapsed one, which lies flat), fiber by fiber (:func:`fiberform.products.sheet_chains`)."""
+    parts = [c.points[:, 2] + 0.5 * c.thickness for c in chains]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def thickness_above_fabric(z_top_of_material: Array, fabric_top_z: float, percentile: float = 95.0) -> float:
+    """Thickness of the sheet above its fabric, m, as the experiments measure a sheet on top of
+    its fabric (thesis Table 4.1: sheet 1, nearly bare, 0 um): the ``percentile`` of the heights
+    of the fibers' upper surfaces (``z_top_of_material``, one per node: :func:`upper_surfaces`)
+    minus the fabric top ``fabric_top_z`` (the highest yarn surface, m), clipped at 0 (a sheet
+    sunk into the fabric's openings is 0 um thick above it; so is a sheet without fibers).
+
+    Why the 95th percentile: like a caliper plate, which rests on the highest points of the sheet,
+    but not on a single outlier: one fiber lying on top of the others, or bent up, owns a few % of
+    the nodes and does not set it; the maximum (100) would. Fibers hanging into the fabric's
+    openings lie below the fabric top and do not count (unlike the 5-95 % span of
+    :func:`sheet_thickness`). Each node is one sample (node-weighted, not length-weighted)."""
+    if len(z_top_of_material) == 0:
+        return 0.0
+    return max(0.0, float(np.percentile(z_top_of_material, percentile)) - fabric_top_z)
+
+
+def _cross_section(scene: Scene) -> str:
+    assert scene.fibers is not None
+    return scene.fibers.cross_section
+
+
+def sheet_thickness_above_fabric(scene: Scene, x: Array, offsets: npt.NDArray[np.int64],
+                                 fiber_id: npt.NDArray[np.int64], fabric_top_z: float) -> float:
+    """:func:`thickness_above_fabric` (95th percentile, m) of a sheet given as its ``/sheet``
+    arrays (node positions, offsets, fiber IDs into fibers.h5), with the sections of the scene's
+    ``fibers.h5`` (``fibers.cross_section``): for the stages' collect, before the product exists."""
+    axes = read_fiber_outer_axes(scene.output_path / FIBERS_H5, fiber_id)
+    return thickness_above_fabric(upper_surfaces(sheet_chains(x, offsets, axes, _cross_section(scene))),
+                                  fabric_top_z)
+
+
+def product_thickness_above_fabric(scene: Scene, sheet_h5: Path, fabric_top_z: float) -> float:
+    """:func:`thickness_above_fabric` (95th percentile, m) of the ``/sheet`` of a ``laydown.h5`` or
+    ``press.h5``, with the sections of the scene's ``fibers.h5`` (``fibers.cross_section``): from
+    stored products only, so also for products written before the metric existed."""
+    chains = read_sheet_chains(sheet_h5, scene.output_path / FIBERS_H5, _cross_section(scene))
+    return thickness_above_fabric(upper_surfaces(chains), fabric_top_z)
 
 
 def write_sheet_vtu(path: Path, x: Array, fiber: Array, offsets: Array) -> None:

@@ -34,6 +34,7 @@ __all__ = [
     "read_yarns",
     "read_fabric_image",
     "read_sheet_chains",
+    "sheet_chains",
     "read_yarn_chains",
 ]
 
@@ -99,31 +100,39 @@ def read_yarn_chains(path: Path) -> list[Chain]:
     return [Chain(pts[offs[i] : offs[i + 1]].copy(), float(rad[i])) for i in range(len(rad))]
 
 
-def read_sheet_chains(laydown_h5: Path, fibers_h5: Path, cross_section: str = "circular") -> list[Chain]:
-    """The fibers on the laid-down (or pressed: ``press.h5`` has the same ``/sheet``) sheet, final
-    snapshot, as element chains with the largest outer section half-axes of their fiber in
-    ``fibers.h5`` (``/fibers/radii[:, :2]``, the per-node jitter of the generate stage). Sections
-    as ``cross_section`` (the scene's ``fibers.cross_section``): circular, radius the largest a1 or
+def sheet_chains(x: FloatArray, offsets: npt.NDArray[np.int64], outer_axes: FloatArray,
+                 cross_section: str = "circular") -> list[Chain]:
+    """The fibers of a sheet as element chains: fiber k's nodes ``x[offsets[k]:offsets[k+1]]``
+    (m, 3) [m] with the largest outer section half-axes of its nodes (``outer_axes``: (a1, a2) per
+    node, aligned with ``x``, as :func:`read_fiber_outer_axes` gives them). Sections as
+    ``cross_section`` (the scene's ``fibers.cross_section``): circular, radius the largest a1 or
     a2; rectangular (collapsed), half-width the largest max(a1, a2) and half-thickness the largest
     min(a1, a2)."""
     if cross_section not in ("circular", "rectangular"):
         raise ValueError(f"cross_section {cross_section!r}: expected circular or rectangular")
-    with h5py.File(laydown_h5, "r") as f:
-        x = np.asarray(f["sheet/x"][...], dtype=np.float64)
-        offs = np.asarray(f["sheet/offsets"][...], dtype=np.int64)
-        ids = np.asarray(f["sheet/fiber_id"][...], dtype=np.int64)
-    with h5py.File(fibers_h5, "r") as f:
-        f_offs = np.asarray(f["fibers/offsets"][...], dtype=np.int64)
-        radii = np.asarray(f["fibers/radii"][...], dtype=np.float64)
+    if len(outer_axes) != len(x):
+        raise ValueError(f"{len(outer_axes)} section half-axes for {len(x)} nodes")
     chains = []
-    for k, fid in enumerate(ids):
-        ax = radii[f_offs[fid] : f_offs[fid + 1], :2]
-        pts = x[offs[k] : offs[k + 1]].copy()
+    for lo, hi in zip(offsets[:-1], offsets[1:]):
+        ax = outer_axes[lo:hi]
+        pts = x[lo:hi].copy()
         if cross_section == "circular":
             chains.append(Chain(pts, float(np.max(ax))))
         else:
             chains.append(Chain(pts, float(np.max(ax.max(axis=1))), float(np.max(ax.min(axis=1)))))
     return chains
+
+
+def read_sheet_chains(laydown_h5: Path, fibers_h5: Path, cross_section: str = "circular") -> list[Chain]:
+    """The fibers on the laid-down (or pressed: ``press.h5`` has the same ``/sheet``) sheet, final
+    snapshot, as element chains (:func:`sheet_chains`) with the largest outer section half-axes of
+    their fiber in ``fibers.h5`` (``/fibers/radii[:, :2]``, the per-node jitter of the generate
+    stage)."""
+    with h5py.File(laydown_h5, "r") as f:
+        x = np.asarray(f["sheet/x"][...], dtype=np.float64)
+        offs = np.asarray(f["sheet/offsets"][...], dtype=np.int64)
+        ids = np.asarray(f["sheet/fiber_id"][...], dtype=np.int64)
+    return sheet_chains(x, offs, read_fiber_outer_axes(fibers_h5, ids), cross_section)
 
 
 @dataclass(frozen=True)

@@ -45,8 +45,8 @@ from ..errors import StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, write_nodes_subset
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
-    mass_fraction_speed, pair_options, sheet_thickness, write_sheet_png, write_sheet_vtu, write_yarns,
-    yarn_distances,
+    mass_fraction_speed, pair_options, product_thickness_above_fabric, sheet_thickness,
+    sheet_thickness_above_fabric, write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
 )
 from ..inputs import (
     LiggghtsInput, dump_format, file_token, fix_ref, jump_if_at_least, step_file_token,
@@ -233,14 +233,18 @@ class Laydown(Stage):
             a = h5["run"].attrs
             return {"settled": float(bool(a["settled"])), "laydown_simulated_time_s": float(a["simulated_time_s"]),
                     "sheet_thickness_m": float(a["sheet_thickness_m"]),
-                    "grammage_kg_m2": float(a["grammage_kg_m2"])}
+                    "grammage_kg_m2": float(a["grammage_kg_m2"]),
+                    "sheet_thickness_above_fabric_m": product_thickness_above_fabric(
+                        ctx.scene, self.product_paths(ctx)[0], float(a["fabric_top_m"]))}
 
     def results(self, ctx: StageContext) -> list[str]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
             a = h5["run"].attrs
+            above = product_thickness_above_fabric(ctx.scene, self.product_paths(ctx)[0], a["fabric_top_m"])
             return [f"lay-down: {'settled' if a['settled'] else 'NOT settled'} after "
                     f"{a['simulated_time_s'] * 1e3:.2f} ms; sheet thickness {a['sheet_thickness_m'] * 1e6:.1f} um "
-                    f"(5-95 % node span + width), grammage {a['grammage_kg_m2'] * 1e3:.3g} g/m^2"]
+                    f"(5-95 % node span + width), {above * 1e6:.1f} um above the fabric top (95th percentile "
+                    f"of the fibers' upper surfaces), grammage {a['grammage_kg_m2'] * 1e3:.3g} g/m^2"]
 
     def execute(self, ctx: StageContext) -> Outcome:
         out = super().execute(ctx)
@@ -423,6 +427,7 @@ class Laydown(Stage):
         gaps = yarn_distances(xs, pts, offs, rad) if len(xs) else np.zeros(0)
         fabric_top = yarns.top
         thickness = sheet_thickness(xs[:, 2], f.width_m) if len(xs) else 0.0
+        above = sheet_thickness_above_fabric(scene, xs, offsets, present, fabric_top)
         area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
 
         g = h5.create_group("sheet")
@@ -469,7 +474,7 @@ class Laydown(Stage):
             "settle_checks": ld.settle_checks, "settle_measure": ld.settle_measure,
             "settle_mass_fraction": ld.settle_mass_fraction, "wall_time_s": wall, "steps_per_check": steps_per_check,
             "removal_height_m": removal_height(scene), "fabric_top_m": fabric_top,
-            "sheet_thickness_m": thickness,
+            "sheet_thickness_m": thickness, "sheet_thickness_above_fabric_m": above,
             "min_element_clearance_m": float(clearances.min()) if len(clearances) else math.inf,
             "grammage_kg_m2": m_sheet / area,
             "approximations": json_list(approximations(scene)),
@@ -554,7 +559,9 @@ class Laydown(Stage):
             f"{', '.join(f'{v:.3g}' for v in measure[-ld.settle_checks:])} m/s; largest node "
             f"speed at the end {max_speeds[-1]:.3g} m/s)",
             f"- sheet thickness estimate (5-95 % node heights + one width): {thickness * 1e6:.1f} um;"
-            f" grammage {m_sheet / area * 1e3:.4g} g/m^2; fabric top at {fabric_top * 1e3:.3f} mm",
+            f" above the fabric top (95th percentile of the fibers' upper surfaces - fabric top, at "
+            f"least 0): {above * 1e6:.1f} um; grammage {m_sheet / area * 1e3:.4g} g/m^2; fabric top at "
+            f"{fabric_top * 1e3:.3f} mm",
             f"- smallest node-to-yarn gap at the end: "
             f"{(gaps.min() if len(gaps) else math.inf) * 1e9:.3g} nm (>= 0: no node inside a yarn)",
             f"- no fiber passes through a yarn: smallest element-to-yarn clearance (distance "

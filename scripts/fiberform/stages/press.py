@@ -38,8 +38,8 @@ from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, write_nodes_subset
 from ..fiber_sheet import (
     YARNS_FIX, Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
-    frame_fibers, sheet_thickness, solid_fraction_profile, static_force_refs, write_sheet_png,
-    write_sheet_vtu, write_yarns,
+    frame_fibers, product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric,
+    solid_fraction_profile, static_force_refs, write_sheet_png, write_sheet_vtu, write_yarns,
 )
 from ..inputs import (
     LiggghtsInput, dump_format, file_token, fix_ref, fix_sum, ident_list, jump_if_at_least, var_ref,
@@ -276,16 +276,20 @@ class Press(Stage):
             return {"press_plate_gap_m": float(c["plate_z"][-1] - a["fabric_top_z_m"]),
                     "press_max_pressure_Pa": float(np.nanmax(c["pressure"][...])),
                     "pressed_span_thickness_m": float(c["thickness_span"][-1]),
-                    "press_stopped_by_guard": float(a.get("stopped_by_guard", 0))}
+                    "press_stopped_by_guard": float(a.get("stopped_by_guard", 0)),
+                    "pressed_thickness_above_fabric_m": product_thickness_above_fabric(
+                        ctx.scene, self.product_paths(ctx)[0], float(a["fabric_top_z_m"]))}
 
     def results(self, ctx: StageContext) -> list[str]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
             c, a = h5["curve"], h5["run"].attrs
             span = c["thickness_span"][...]
             p = c["pressure"][...]
+            above = product_thickness_above_fabric(ctx.scene, self.product_paths(ctx)[0], a["fabric_top_z_m"])
             line = (f"press ({a['mode']}): plate at {(c['plate_z'][-1] - a['fabric_top_z_m']) * 1e6:.1f} um "
                     f"above the fabric top, largest pressure {np.nanmax(p):.3g} Pa; span thickness "
-                    f"{span[0] * 1e6:.1f} -> {span[-1] * 1e6:.1f} um")
+                    f"{span[0] * 1e6:.1f} -> {span[-1] * 1e6:.1f} um; pressed sheet {above * 1e6:.1f} um above "
+                    "the fabric top (95th percentile of the fibers' upper surfaces)")
             if a.get("stopped_by_guard", 0):
                 line += "; stopped by the overlap guard before its target"
             if "hold_pressure_mean_Pa" in a:
@@ -496,6 +500,8 @@ class Press(Stage):
         rg.attrs["fiberdem_wall_s"] = wall
         rg.attrs["ranks"] = pr.ranks
         rg.attrs["stopped_by_guard"] = int(bool(guard_stop))
+        above = sheet_thickness_above_fabric(scene, x_last, off_last, fid_last, p.fabric_top)
+        rg.attrs["pressed_thickness_above_fabric_m"] = above
         final = work / RESTART_NAME
         if not final.is_file():
             raise StageError(f"{final}: fiberdem wrote no final restart file (see work/{LOG_NAME})")
@@ -523,6 +529,8 @@ class Press(Stage):
             *([f"- **{guard_stop}**; the plate was {(plate_z[-1] - p.fabric_top) * 1e6:.2f} um above "
                "the fabric top there: the pressed sheet is that of this moment"] if guard_stop else []),
             *[f"- {line}" for line in summary["lines"]],
+            f"- pressed sheet (last snapshot) above the fabric top: {above * 1e6:.1f} um (95th percentile "
+            "of the fibers' upper surfaces - fabric top, at least 0)",
             f"- overlap guard: {pr.overlap_limit:g} x the thinner fiber's thickness "
             f"({p.t_min * 1e6:.3g} um) added by the press to the lay-down's own overlaps "
             f"(fiber-fiber {p.start_overlap_fiber / p.t_min:.3f}, fiber-yarn "
@@ -530,7 +538,8 @@ class Press(Stage):
             f"over the run: fiber-fiber {np.nanmax(ovl_fiber):.3f}, fiber-yarn "
             f"{np.nanmax(ovl_yarn):.3f}, plate {np.nanmax(ovl_plate):.3f} (x thickness)",
             "", "Thickness definitions (docs/stages/press.md): plate = plate height - fabric top "
-            "while the plate touches fibers; span = 5-95 % node heights + one fiber width; solid "
+            "while the plate touches fibers; span = 5-95 % node heights + one fiber width; above the "
+            "fabric = 95th percentile of the fibers' upper surfaces - fabric top; solid "
             f"fraction = height range where the profile exceeds {PHI_SHARE:g} x its maximum.", "",
             f"Pictures: `{PNG_NAME}`, `{CURVE_NAME}`; ParaView: `{VTU_NAME}`; data: `{H5_NAME}`; "
             f"log: `work/{LOG_NAME}`.",
@@ -552,15 +561,26 @@ def _summary(pr: PressSection, t: Array, pressure: Array, thick_plate: Array, sp
     if pr.mode == "pressure":
         assert pr.target_pressure_Pa is not None
         hold = ph == "hold"
-        if np.any(hold):
+        # the hold is reached when the plate presses fibers in it (thickness_plate is NaN while
+        # the plate touches none, e.g. resting at the fabric top as the schedule's clock runs on)
+        contact = hold & ~np.isnan(thick_plate)
+        if np.any(contact):
             ph_hold = pressure[hold]
             out["hold_pressure_mean_Pa"] = float(np.mean(ph_hold))
             out["hold_pressure_max_dev"] = float(np.max(np.abs(ph_hold / pr.target_pressure_Pa - 1)))
-            out["thickness_plate_at_hold_m"] = float(np.nanmean(thick_plate[hold]))
+            out["thickness_plate_at_hold_m"] = float(np.mean(thick_plate[contact]))
             lines.append(f"hold: pressure {np.mean(ph_hold):.4g} Pa (target "
                          f"{pr.target_pressure_Pa:.4g} Pa, largest deviation "
                          f"{out['hold_pressure_max_dev'] * 100:.2f} %); plate thickness "
-                         f"{np.nanmean(thick_plate[hold]) * 1e6:.2f} um")
+                         f"{out['thickness_plate_at_hold_m'] * 1e6:.2f} um")
+        elif np.any(hold):
+            lines.append(f"hold: **never reached**: the plate touched no fiber in the schedule's hold "
+                         f"(pressure {np.mean(pressure[hold]):.4g} Pa, target {pr.target_pressure_Pa:.4g} Pa)")
+        else:
+            stop = (f", stopped by the overlap guard {guard_gap * 1e6:.2f} um above the fabric top"
+                    if guard_gap is not None else "")
+            lines.append(f"hold: **never reached**: the press ended in its "
+                         f"{ph[-1] if len(ph) else 'first'} phase{stop}")
         if np.any(at_stop):
             lines.append(f"**target pressure not reached**: the plate came down to the fabric top "
                          f"(it rests on the yarn knuckles and never passes them) at "
