@@ -21,6 +21,12 @@ Variants (``--variants``):
   steric   newton, steric term only (a speed option: no colloidal terms)
   loose    newton with laydown.newton_tolerance 1e-6 instead of 1e-8 (a speed option: fewer Newton
            iterations; corrections below 1e-6 x the section radius, ~15 pm, end the iteration)
+  loose_soft
+           loose with the fibers' Young's and shear moduli at 1/3 of the case scenes' 10 and 4 GPa
+           (issue 15, open question (a): "fibers too stiff", thesis sec. 5.2)
+  loose_nofines
+           loose with fiber_generation.fines_fraction 0 (the same injected mass, all of it in
+           fibers; issue 15, open question (b))
   two_way, loose_two_way
            newton / loose with coupling.mode two_way (issue 13): fiberPimpleFoam on one more process
            next to the --ranks fiber ranks, the drag reaction exchanged every coupling.interval
@@ -75,6 +81,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "two_way": {"laydown.fiber_contact": "newton", "coupling.mode": "two_way"},
     "loose_two_way": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
                       "coupling.mode": "two_way"},
+    # issue 15's open questions (a) and (b), each against ``loose`` (the thesis' sec. 5.2)
+    "loose_soft": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
+                   "fibers.youngs_modulus_Pa": 10.0e9 / 3.0, "fibers.shear_modulus_Pa": 4.0e9 / 3.0},
+    "loose_nofines": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
+                      "fiber_generation.fines_fraction": 0.0},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
@@ -135,9 +146,14 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
     if proc.returncode != 0 or not h5.is_file():
         row["error"] = (proc.stdout[-800:] + proc.stderr[-800:]).strip()
         return row
+    with h5py.File(out / "fibers" / "fibers.h5", "r") as f:
+        is_fine = f["fibers/is_fine"][...].astype(bool)
     with h5py.File(h5, "r") as h:
         a = dict(h["run"].attrs)
         nodes = int(h["sheet/x"].shape[0])
+        kept = np.unique(h["sheet/fiber_id"][...])
+        row.update({"fibers_generated": int(is_fine.size), "fines_generated": int(is_fine.sum()),
+                    "fibers_on_sheet": int(kept.size), "fines_on_sheet": int(is_fine[kept].sum())})
         ff = h["snapshots/min_fiber_fiber_gap"][...]
         if "drainage" in h:
             u = h["drainage/superficial_velocity"][...]
