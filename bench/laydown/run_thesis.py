@@ -11,8 +11,9 @@ fiberform.reuse.adopt_stages). The numbers come from laydown.h5, the fiberdem lo
 accounting:
 
 * simulated time, settled or not, wall time of the lay-down program, node-steps per second;
-* the sheet: thickness, grammage, smallest fiber-fiber gap and element-yarn clearance (the
-  lay-down's own checks of every snapshot);
+* the sheet: thickness (5-95 % span and above the fabric top), grammage, fibers and fines on it,
+  smallest fiber-fiber gap and element-yarn clearance (the lay-down's own checks of every
+  snapshot);
 * the largest resident memory of one process (getrusage of the children).
 
 Variants (``--variants``):
@@ -63,6 +64,7 @@ import numpy as np
 import yaml
 
 from fiberform.campaign import use_fiber_contact
+from fiberform.fiber_sheet import product_thickness_above_fabric
 from fiberform.products import read_sheet
 from fiberform.provenance import atomic_write_text, machine_info
 from fiberform.reuse import adopt_stages
@@ -73,19 +75,19 @@ from fiberform.sweep import set_field
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 THESIS = ROOT / "scenes" / "thesis"
+#: the loose variant's fields (the thesis' terms inside the Newton solve at tolerance 1e-6), which
+#: the variants built on it extend
+LOOSE: dict[str, Any] = {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6}
 VARIANTS: dict[str, dict[str, Any]] = {
     "thesis": {},
     "newton": {"laydown.fiber_contact": "newton"},
     "steric": {"laydown.fiber_contact": "newton", "laydown.terms": ["steric"], "contact.terms": ["steric"]},
-    "loose": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6},
+    "loose": LOOSE,
     "two_way": {"laydown.fiber_contact": "newton", "coupling.mode": "two_way"},
-    "loose_two_way": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
-                      "coupling.mode": "two_way"},
+    "loose_two_way": {**LOOSE, "coupling.mode": "two_way"},
     # issue 15's open questions (a) and (b), each against ``loose`` (the thesis' sec. 5.2)
-    "loose_soft": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
-                   "fibers.youngs_modulus_Pa": 10.0e9 / 3.0, "fibers.shear_modulus_Pa": 4.0e9 / 3.0},
-    "loose_nofines": {"laydown.fiber_contact": "newton", "laydown.newton_tolerance": 1.0e-6,
-                      "fiber_generation.fines_fraction": 0.0},
+    "loose_soft": {**LOOSE, "fibers.youngs_modulus_Pa": 10.0e9 / 3.0, "fibers.shear_modulus_Pa": 4.0e9 / 3.0},
+    "loose_nofines": {**LOOSE, "fiber_generation.fines_fraction": 0.0},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
@@ -165,6 +167,7 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
         "wall_s_per_simulated_ms": wall / max(float(a["simulated_time_s"]) * 1e3, 1e-12),
         "node_steps_per_s": nodes * steps / wall if wall > 0 else float("nan"),
         "sheet_thickness_m": float(a["sheet_thickness_m"]), "grammage_kg_m2": float(a["grammage_kg_m2"]),
+        "sheet_thickness_above_fabric_m": above_fabric(out, float(a["fabric_top_m"])),
         "min_fiber_fiber_gap_m": float(np.min(ff)) if ff.size else float("nan"),
         "final_fiber_fiber_gap_m": float(ff[-1]) if ff.size else float("nan"),
         "min_element_yarn_clearance_m": float(a["min_element_clearance_m"]),
@@ -172,6 +175,14 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
     })
     row["run_dir"] = str(out.relative_to(ROOT))
     return row
+
+
+def above_fabric(run_dir: Path, fabric_top: float) -> float:
+    """The lay-down's thickness above the fabric top (m; fiberform.fiber_sheet.thickness_above_fabric,
+    the lay-down stage's metric sheet_thickness_above_fabric_m) from the run's products."""
+    scene = load_scene(run_dir / "scene.yaml")
+    scene = scene.model_copy(update={"output_dir": str(run_dir.resolve())})
+    return product_thickness_above_fabric(scene, run_dir / "laydown" / "laydown.h5", fabric_top)
 
 
 def sheet_measures(run_dir: Path) -> dict[str, Any]:
