@@ -25,6 +25,10 @@ from fiberform.inputs import (
     foam_entry,
     foam_value,
     is_identifier,
+    fix_affine,
+    print_values,
+    var_distance,
+    var_value,
 )
 
 INJECTIONS = [
@@ -203,3 +207,24 @@ def test_ident_list_accepts_identifiers_only() -> None:
     for bad in (["vdw", "es steric"], ["vdw\nshell ls"], [], "vdw", ["1abc"]):
         with pytest.raises(InputFormatError):
             ident_list(bad)  # type: ignore[arg-type]
+
+
+def test_variable_formula_helpers() -> None:
+    """The press's approach variables: numbers at full precision, identifiers only."""
+    assert fix_affine("plate", 10, -1.0, 0.0027956425032346598).text == \
+        "0.0027956425032346598+-1.0*f_plate[10]"
+    assert var_value("servo_z").text == "${servo_z}"
+    assert var_distance("servo_z", 0.002637).text == "abs(v_servo_z-0.002637)"
+    assert print_values("FIBERFORM_SERVO_START", "servo_step", "servo_z").text == \
+        '"FIBERFORM_SERVO_START ${servo_step} ${servo_z}"'
+
+
+@pytest.mark.parametrize("value", INJECTIONS)
+def test_variable_formula_helpers_refuse_injections(value: str) -> None:
+    for make in (lambda: var_value(value), lambda: var_distance(value, 1.0),
+                 lambda: print_values(value), lambda: print_values("M", value),
+                 lambda: fix_affine(value, 1, 1.0, 0.0)):
+        with pytest.raises(InputFormatError):
+            make()
+    with pytest.raises(InputFormatError):
+        fix_affine("plate", 1, math.nan, 0.0)

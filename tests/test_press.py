@@ -130,22 +130,43 @@ def test_velocity_mode_stops_at_target_thickness(sheet: Path, fiberform_cmd: lis
 
 def test_pressure_mode_follows_its_schedule(sheet: Path, fiberform_cmd: list[str],
                                             build_dir: Path) -> None:
-    p, rate, hold, release = 20.0, 4.0e4, 4.0e-4, 3.0e-4
+    p, rate, hold, release = 2.0, 4.0e3, 4.0e-4, 3.0e-4
     proc = _press(sheet, fiberform_cmd, build_dir,
                   f"{{mode: pressure, target_pressure_Pa: {p}, pressure_rate_Pa_s: {rate}, "
                   f"hold_time_s: {hold}, release_time_s: {release}, plate_speed_m_s: 0.02, "
                   "output_interval_s: 1.0e-4}", "pressure")
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     fab = _fabric_top(sheet)
+    top = _sheet_top(sheet)
     with h5py.File(sheet / "runs" / NAME / "press" / "press.h5", "r") as h:
-        c = h["curve"]
+        c, a = h["curve"], h["run"].attrs
         tc, target = c["time_since_contact"][...], c["target_pressure"][...]
         z, yarn_f = c["plate_z"][...], c["yarn_force"][...]
+        pressure, phase, t = c["pressure"][...], c["phase"][...].astype(str), c["time"][...]
         assert c["yarn_force"].attrs["units"] == "N"
+        reached, z_servo = int(a["contact_pressure_reached"]), float(a["servo_start_z_m"])
+        assert a["contact_pressure_Pa"] == pytest.approx(0.01 * p, rel=1e-12)
     # the plate never passes the fabric top (keyword stop of fix wall/fiber/dlvo)
     assert np.all(z >= fab - 1e-12), (z.min(), fab)
+    # the approach: from 5 um above the sheet's highest fiber down at the speed limit, until the
+    # plate pressure reaches 1 % of the target (checked at each output: the last approach point
+    # is the first at or above it) or the plate reaches the fabric top; only then the schedule
+    app = np.nonzero(phase == "approach")[0]
+    assert len(app) >= 2 and app[0] == 0 and np.all(np.diff(app) == 1), phase
+    assert z[0] == pytest.approx(top + 5e-6, abs=1e-12)
+    moving = z[app] > fab + 1e-12
+    v = -np.diff(z[app]) / np.diff(t[app])
+    assert np.allclose(v[moving[1:]], 0.02, rtol=1e-6), v
+    assert np.all(pressure[app[:-1]] < 0.01 * p), pressure[app]
+    if reached:
+        assert pressure[app[-1]] >= 0.01 * p, pressure[app]
+    else:
+        assert z[app[-1]] == pytest.approx(fab, abs=1e-12), (z[app[-1]], fab)
+    # the servo takes the plate where the approach left it
+    assert z_servo == pytest.approx(z[app[-1]], abs=1e-15), (z_servo, z[app[-1]])
+    assert np.all(tc[app] == -1.0)
     # the servo's target: ramp at `rate` to p, hold, unload at `rate`, zero in the release; the
-    # clock starts at the first contact (time since contact < 0 before it: target 0)
+    # clock starts at the servo's first contact (time since contact < 0 before it: target 0)
     ramp = p / rate
     want = np.interp(tc, [0.0, ramp, ramp + hold, 2 * ramp + hold], [0.0, p, p, 0.0])
     want[tc < 0] = 0.0

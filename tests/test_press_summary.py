@@ -7,15 +7,18 @@ from __future__ import annotations
 
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fiberform.provenance import text_hash
 from fiberform.scene import PressSection
 from fiberform.stages.press import _summary
 
 PRESS = PressSection(mode="pressure", target_pressure_Pa=4.1e5, hold_time_s=2.0e-4, release_time_s=1.0e-4)
 NAN = math.nan
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def summary(phase: list[str], pressure: list[float], thick_plate: list[float], at_stop: list[bool],
@@ -64,3 +67,26 @@ def test_hold_reached_averages_the_contact_points() -> None:
     assert isinstance(lines, list)
     assert any(line.startswith("hold: pressure 4.1e+05 Pa") and line.endswith("plate thickness 25.00 um")
                for line in lines), lines
+
+
+def test_pressure_method_is_hashed_for_pressure_presses_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A change of the pressure mode's method (PRESSURE_METHOD) makes pressure-mode press products
+    stale and leaves velocity-mode ones valid: the entry is in the pressure mode's input hashes
+    only, and the rest of the hashes is the base stage's."""
+    from fiberform.scene import load_scene
+    from fiberform.stages._stage import Stage, StageContext
+    from fiberform.stages.press import PRESSURE_METHOD, Press
+
+    scene = load_scene(ROOT / "scenes" / "demo.yaml")
+    assert scene.press is not None
+    monkeypatch.chdir(tmp_path)  # no upstream products here: their hashes read "missing"
+    hashes = {}
+    for mode, extra in (("velocity", {"target_thickness_m": 5e-5}), ("pressure", {"target_pressure_Pa": 1e3})):
+        press = PressSection(mode=mode, **extra)
+        ctx = StageContext(scene.model_copy(update={"press": press}), ROOT / "scenes" / "demo.yaml", tmp_path)
+        hashes[mode] = (Press().input_hashes(ctx), Stage.input_hashes(Press(), ctx))
+    own, base = hashes["velocity"]
+    assert own == base and "pressure_method" not in own
+    own, base = hashes["pressure"]
+    assert set(own) - set(base) == {"pressure_method"}
+    assert own["pressure_method"] == text_hash(f"press-pressure:{PRESSURE_METHOD}")

@@ -31,6 +31,7 @@ __all__ = [
     "Token",
     "dump_format",
     "file_token",
+    "fix_affine",
     "fix_ref",
     "ident_list",
     "jump_if_at_least",
@@ -184,6 +185,29 @@ def fix_sum(refs: Sequence[tuple[str, int]]) -> Token:
 def var_ref(name: str) -> Token:
     """A reference to an equal-style variable, ``v_NAME`` (thermo output)."""
     return Token("v_" + fmt_ident(name), _TOKEN_KEY)
+
+
+def var_value(name: str) -> Token:
+    """``${NAME}``: the variable's value substituted into the command when LIGGGHTS reads it
+    (an equal-style variable is evaluated then, printed with 15 significant digits)."""
+    return Token("${" + fmt_ident(name) + "}", _TOKEN_KEY)
+
+
+def fix_affine(fix_id: str, index: int, scale: float, offset: float) -> Token:
+    """``OFFSET+SCALE*f_ID[n]``, an equal-style variable's formula (a fix value in other units or
+    from another origin, e.g. a plate's height from its displacement)."""
+    return Token(fmt_float(offset) + "+" + fmt_float(scale) + "*" + fix_ref(fix_id, index).text, _TOKEN_KEY)
+
+
+def var_distance(name: str, value: float) -> Token:
+    """``abs(v_NAME-VALUE)``, an equal-style variable's formula."""
+    return Token("abs(" + var_ref(name).text + "-" + fmt_float(value) + ")", _TOKEN_KEY)
+
+
+def print_values(marker: str, *names: str) -> Token:
+    """The quoted text of ``print``: a marker and the values of variables, ``"MARKER ${a} ${b}"``
+    (a log line the stage parses)."""
+    return Token('"' + " ".join([fmt_ident(marker), *(var_value(n).text for n in names)]) + '"', _TOKEN_KEY)
 
 
 def jump_if_at_least(variable: str, threshold: int | float, label: str,

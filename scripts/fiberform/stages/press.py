@@ -12,8 +12,10 @@ laydown section's contact terms and integrator.
   ``target_thickness_m`` above the fabric top, then rests for ``hold_time_s``.
 - ``press.mode: pressure``: the fix's servo (docs/models/press.md) drives the plate so that the
   contact pressure (plate force / domain cross-section) follows a ramp to ``target_pressure_Pa``,
-  a hold, an unloading and a release at zero pressure; the schedule's clock starts at the first
-  contact.
+  a hold, an unloading and a release at zero pressure. The plate first approaches at
+  ``plate_speed_m_s`` until the plate pressure reaches ``CONTACT_SHARE`` x the target (the sheet's
+  body carries it, not a lone fiber standing up) or the plate reaches the fabric top; the
+  schedule's clock starts there.
 
 At every ``output_interval_s``: a snapshot of the nodes, the plate's position and force, the
 overlap guard (the run ends when an element overlaps another fiber, a yarn or the plate by more
@@ -42,14 +44,15 @@ from ..fiber_sheet import (
     solid_fraction_profile, static_force_refs, write_sheet_png, write_sheet_vtu, write_yarns,
 )
 from ..inputs import (
-    LiggghtsInput, dump_format, file_token, fix_ref, fix_sum, ident_list, jump_if_at_least, var_ref,
+    LiggghtsInput, dump_format, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
+    print_values, var_distance, var_ref, var_value,
 )
 from ..liggghts_log import read_dump, thermo_rows, total_wall_time
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
     read_sheet, read_yarns,
 )
-from ..provenance import file_hash, write_dataset
+from ..provenance import file_hash, text_hash, write_dataset
 from ..runner import liggghts_progress
 from ..scene import FluidSection, PressSection, Scene
 from ._stage import Program, Stage, StageContext
@@ -61,6 +64,16 @@ REPORT_NAME, RESTART_NAME = "report.md", "sheet.restart"
 INPUT_NAME, LOG_NAME, TRAJ_NAME, YARNS_NAME = "in.press", "log.fiberdem", "traj.dump", "yarns.txt"
 START_NAME = "laydown.restart"
 END_LABEL, GUARD_MARKER = "press_end", "FIBERFORM_OVERLAP"
+#: pressure mode: the end of the approach (label), the log lines of its end (the contact pressure
+#: reached) and of the servo's start (step, plate height)
+SERVO_LABEL, CONTACT_MARKER, SERVO_MARKER = "press_servo", "FIBERFORM_CONTACT", "FIBERFORM_SERVO_START"
+#: pressure mode: the approach ends when the plate pressure reaches this share of the target
+CONTACT_SHARE = 0.01
+#: the pressure mode's method, in the input hashes of pressure-mode presses only (velocity-mode
+#: products stay valid when it changes): 2 = the approach until the contact pressure, then the
+#: servo (1: the servo's clock started at the plate's first touch of any fiber, so on a sheet with a
+#: fiber standing up the schedule ran out before the plate reached the sheet)
+PRESSURE_METHOD = 2
 #: the solid-fraction thickness: the height range where the profile exceeds this share of its maximum
 PHI_SHARE = 0.1
 #: thermo columns (the order of thermo_style in build_input)
@@ -105,19 +118,26 @@ class PressPlan:
             self.z_end = fabric_top + pr.target_thickness_m
             self.hold_steps = self.every * math.ceil(round(pr.hold_time_s / self.dt) / self.every)
             self.schedule: list[tuple[float, float]] = []
+            self.approach_steps = 0
+            self.contact_pressure = math.nan
             total = self.move_steps + self.hold_steps
         else:
             assert pr.target_pressure_Pa is not None
             p, ramp = pr.target_pressure_Pa, pr.target_pressure_Pa / pr.rate
             self.schedule = [(0.0, 0.0), (ramp, p), (ramp + pr.hold_time_s, p),
                              (2 * ramp + pr.hold_time_s, 0.0)]
-            approach = pr.plate_start_gap_m / pr.plate_speed_m_s
-            t_end = approach + 2 * ramp + pr.hold_time_s + pr.release_time_s
-            self.move_steps = self.every * math.ceil(t_end / self.dt / self.every)
+            # the approach: at plate_speed_m_s until the plate pressure reaches the contact
+            # pressure (checked at every output), at most until the plate reaches the fabric top
+            self.contact_pressure = CONTACT_SHARE * p
+            approach = (self.z0 - fabric_top) / pr.plate_speed_m_s
+            self.approach_steps = self.every * math.ceil(approach / self.dt / self.every)
+            # then the servo's schedule and the release (move_steps: the servo's part)
+            t_servo = 2 * ramp + pr.hold_time_s + pr.release_time_s
+            self.move_steps = self.every * math.ceil(t_servo / self.dt / self.every)
             self.speed = pr.plate_speed_m_s
             self.hold_steps = 0
             self.z_end = math.nan
-            total = self.move_steps
+            total = self.approach_steps + self.move_steps
         self.total_steps = total
         if total > 10**8:
             raise SceneError("press", ["press: more than 1e8 steps (timestep_s too small for the "
@@ -194,7 +214,8 @@ def build_input(scene: Scene, p: PressPlan) -> str:
 
     started: list[bool] = []
 
-    def chunks(steps: int, first: bool) -> None:
+    def chunks(steps: int, first: bool, leave: tuple[tuple[str, float, str, str], ...] = ()) -> None:
+        # leave: (variable, threshold, label, marker): also leave for LABEL when VARIABLE >= threshold
         done = 0
         while done < steps:
             n = min(p.every, steps - done)
@@ -213,6 +234,8 @@ def build_input(scene: Scene, p: PressPlan) -> str:
                 guards.append(("ovl_pair", p.guard_fiber))
             for var, bound in guards:
                 s.command("if", *jump_if_at_least(var, bound, END_LABEL, GUARD_MARKER))
+            for var, bound, label, marker in leave:
+                s.command("if", *jump_if_at_least(var, bound, label, marker))
 
     if pr.mode == "velocity":
         plate(p.z0, "velocity", 0.0, 0.0, -p.speed)
@@ -228,12 +251,40 @@ def build_input(scene: Scene, p: PressPlan) -> str:
         sched: list[object] = [len(p.schedule)]
         for t, pv in p.schedule:
             sched += [t, pv]
-        plate(p.z0, "servo", p.area, pr.plate_speed_m_s, pr.band, *sched)
+        # the approach: the plate moves down at the speed limit until the sheet carries the
+        # contact pressure (f_plate[9]: the force on the fibers along z, < 0 when pressed)
+        s.command("variable", "p_plate", "equal", fix_affine("plate", 9, -1.0 / p.area, 0.0))
+        s.command("variable", "plate_z", "equal", fix_affine("plate", 10, -1.0, p.z0))
+        plate(p.z0, "velocity", 0.0, 0.0, -pr.plate_speed_m_s)
+        thermo()
+        chunks(p.approach_steps, True, (("p_plate", p.contact_pressure, SERVO_LABEL, CONTACT_MARKER),))
+        s.label(SERVO_LABEL)
+        # the servo takes the plate where the approach left it (its clock starts at its first
+        # contact, at once when the contact pressure was reached); abs(): the approach's plate
+        # never passes the fabric top, so the remaining travel is >= 0 up to round-off
+        s.command("variable", "servo_z", "equal", var_value("plate_z"))
+        s.command("variable", "servo_stop", "equal", var_distance("servo_z", p.fabric_top))
+        s.command("variable", "servo_step", "equal", "step")
+        s.command("print", print_values(SERVO_MARKER, "servo_step", "servo_z"))
+        s.command("unfix", "plate")
+        s.command("fix", "plate", "all", "wall/fiber/dlvo", "plane", cx, cy, var_value("servo_z"), 0.0, 0.0,
+                  -1.0, "servo", p.area, pr.plate_speed_m_s, pr.band, *sched, "stop", var_value("servo_stop"),
+                  *plate_words)
         thermo()
         chunks(p.move_steps, True)
     s.label(END_LABEL)
     s.command("write_restart", file_token(RESTART_NAME))
     return s.render()
+
+
+def servo_start(log: str) -> tuple[int, float] | None:
+    """Pressure mode: the step and the plate height (m) where the servo took over from the
+    approach (the ``FIBERFORM_SERVO_START`` line of the log), or None (the run ended before it)."""
+    for line in log.splitlines():
+        words = line.split()
+        if len(words) == 3 and words[0] == SERVO_MARKER:
+            return int(float(words[1])), float(words[2])
+    return None
 
 
 def phases(mode: str, t_contact: Array, schedule: list[tuple[float, float]]) -> list[str]:
@@ -269,6 +320,12 @@ class Press(Stage):
     binaries = ("fiberdem",)
     code_version = 1
     splits = True
+
+    def input_hashes(self, ctx: StageContext) -> dict[str, str]:
+        hashes = super().input_hashes(ctx)
+        if ctx.scene.press is not None and ctx.scene.press.mode == "pressure":
+            hashes["pressure_method"] = text_hash(f"press-pressure:{PRESSURE_METHOD}")
+        return hashes
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
@@ -390,7 +447,8 @@ class Press(Stage):
         pr, dom, f = scene.press, scene.domain, scene.fibers
         assert pr is not None and dom is not None and f is not None
         pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
-        rows = np.array(thermo_rows((work / LOG_NAME).read_text(errors="replace")), dtype=float)
+        log_text = (work / LOG_NAME).read_text(errors="replace")
+        rows = np.array(thermo_rows(log_text), dtype=float)
         if rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
             raise StageError(f"{work / LOG_NAME}: no thermo table of {len(COLUMNS)} columns")
         # rows of the run commands: each chunk prints its first and last step; keep one per step
@@ -406,8 +464,12 @@ class Press(Stage):
             plate_z = np.where(moving, p.z0 - col["disp"], p.z_end - col["disp"])
             t_contact = np.where(moving, 1.0, -1.0)
         else:
-            plate_z = p.z0 - col["disp"]
-            t_contact = col["t_contact"]
+            # the approach's plate (from z0), then the servo's (from where the approach ended)
+            start = servo_start(log_text)
+            servo = steps > (start[0] - step0) if start is not None else np.zeros(len(steps), bool)
+            z_servo = start[1] if start is not None else math.nan
+            plate_z = np.where(servo, z_servo - col["disp"], p.z0 - col["disp"])
+            t_contact = np.where(servo, col["t_contact"], -1.0)
         force = np.stack([col["fx"], col["fy"], col["fz"]], axis=1)
         pressure = 0.0 - force[:, 2] / p.area  # the plate pushes the fibers down: F_z < 0 (no -0)
         in_contact = np.abs(force[:, 2]) > 0.0
@@ -461,7 +523,10 @@ class Press(Stage):
                       else np.full(len(t), math.nan), "s",
                       "pressure mode: time since the plate's first contact, the servo schedule's "
                       "clock (-1 before it); velocity mode: NaN")
-        write_dataset(g, "plate_at_stop", col["at_stop"].astype(np.int8), "1",
+        # at the fabric top: the fix's flag, or the plate's height (a servo that takes over at the
+        # fabric top has a zero travel left and its flag may read 0 while it rests there)
+        at_stop = (col["at_stop"] > 0.5) | (plate_z <= p.fabric_top + 1e-12)
+        write_dataset(g, "plate_at_stop", at_stop.astype(np.int8), "1",
                       "1 while the plate rests at the fabric top (it never passes it)")
         write_dataset(g, "yarn_force", np.stack([col["yarn_fx"], col["yarn_fy"], col["yarn_fz"]], 1),
                       "N", "contact force of the yarns and side planes on the fibers (last step "
@@ -500,6 +565,26 @@ class Press(Stage):
         rg.attrs["fiberdem_wall_s"] = wall
         rg.attrs["ranks"] = pr.ranks
         rg.attrs["stopped_by_guard"] = int(bool(guard_stop))
+        approach_line = []
+        if pr.mode == "pressure":
+            reached = any(line.strip() == CONTACT_MARKER for line in log_text.splitlines())
+            start = servo_start(log_text)
+            rg.attrs["contact_pressure_Pa"] = p.contact_pressure
+            rg.attrs["contact_pressure_reached"] = int(reached)
+            rg.attrs["servo_start_z_m"] = start[1] if start is not None else math.nan
+            rg.attrs["servo_start_time_s"] = (start[0] - step0) * p.dt if start is not None else math.nan
+            if start is None:
+                how = (f"did not bring the sheet to {p.contact_pressure:.4g} Pa ({CONTACT_SHARE:g} x the "
+                       "target): the press ended in the approach, before the servo took over")
+            elif reached:
+                how = (f"reached {p.contact_pressure:.4g} Pa ({CONTACT_SHARE:g} x the target) "
+                       f"{(start[1] - p.fabric_top) * 1e6:.2f} um above the fabric top after "
+                       f"{(start[0] - step0) * p.dt * 1e3:.3f} ms: the servo's schedule starts there")
+            else:
+                how = (f"came down to {(start[1] - p.fabric_top) * 1e6:.2f} um above the fabric top "
+                       f"without the sheet carrying {p.contact_pressure:.4g} Pa ({CONTACT_SHARE:g} x the "
+                       "target): the servo's schedule starts there")
+            approach_line = [f"- approach at {pr.plate_speed_m_s:g} m/s: the plate {how}"]
         above = sheet_thickness_above_fabric(scene, x_last, off_last, fid_last, p.fabric_top)
         rg.attrs["pressed_thickness_above_fabric_m"] = above
         final = work / RESTART_NAME
@@ -515,7 +600,7 @@ class Press(Stage):
         _write_curve(tmp[CURVE_NAME], thick_plate, np.array(span), pressure, phase,
                      f"{scene.name}: pressure vs thickness ({pr.mode} mode)")
         summary = _summary(pr, t, pressure, thick_plate, np.array(span), np.array(phi_thick),
-                           phase, col["at_stop"] > 0.5, float(plate_z[-1] - p.fabric_top) if guard_stop else None)
+                           phase, at_stop, float(plate_z[-1] - p.fabric_top) if guard_stop else None)
         for key, value in summary.items():
             if isinstance(value, float):
                 rg.attrs[key] = value
@@ -526,6 +611,7 @@ class Press(Stage):
             f"fabric top {p.fabric_top * 1e3:.4f} mm",
             f"- {int(steps[-1])} steps of {p.dt:g} s = {t[-1] * 1e3:.3f} ms simulated; fiberdem "
             f"wall time {wall:.1f} s on {pr.ranks} rank(s)",
+            *approach_line,
             *([f"- **{guard_stop}**; the plate was {(plate_z[-1] - p.fabric_top) * 1e6:.2f} um above "
                "the fabric top there: the pressed sheet is that of this moment"] if guard_stop else []),
             *[f"- {line}" for line in summary["lines"]],
