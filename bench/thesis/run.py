@@ -213,7 +213,9 @@ def _main() -> int:
         "points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
                     "press_target_m": p.press_target_m} for p in chosen],
         "pressure_press": None if c.pressure_press is None else c.pressure_press.model_dump(),
-        "wall_s": time.monotonic() - t_start, "failures": failures, "pending": pending, "variants": variants,
+        # --collect-only runs nothing: no wall time of its own (each stage's is in its variant row)
+        "collect_only": bool(args.collect_only),
+        "wall_s": None if args.collect_only else time.monotonic() - t_start, "failures": failures, "pending": pending, "variants": variants,
         "summary": summary, **ratios})
     print(f"wrote {out}")
     for path in campaign_report.write_report(json.loads(out.read_text()), sheets, out):
