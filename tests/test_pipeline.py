@@ -126,10 +126,18 @@ def _status(d: Path) -> dict[str, tuple[str, str]]:
     return parse_status(r.stdout)
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start_flow(d: Path) -> subprocess.Popen[str]:
     """`fiberform flow` in its own session; returns once its status says running."""
+    # SIGINT at its default, so that Python installs its Ctrl-C handler in fiberform even when this
+    # test runs in a shell's background job (a non-interactive shell starts those with SIGINT
+    # ignored, and an ignored signal stays ignored across exec: fiberform then never sees the SIGINT)
     proc = subprocess.Popen([sys.executable, "-m", "fiberform", "flow", "s.yaml", "--force"], cwd=d, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_default_sigint)
     state = d / "runs/pipe/flow/stage-state.json"
     deadline = time.monotonic() + 120
     while not (state.is_file() and '"running"' in state.read_text()):
