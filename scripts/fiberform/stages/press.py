@@ -44,7 +44,7 @@ from ..fiber_sheet import (
     solid_fraction_profile, static_force_refs, write_sheet_png, write_sheet_vtu, write_yarns,
 )
 from ..inputs import (
-    LiggghtsInput, dump_format, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
+    LiggghtsInput, Token, dump_format, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
     print_values, var_distance, var_ref, var_value,
 )
 from ..liggghts_log import read_dump, thermo_rows, total_wall_time
@@ -200,10 +200,14 @@ def build_input(scene: Scene, p: PressPlan) -> str:
         else contact_integrator_words(ld))
     cx, cy = p.centre
 
-    def plate(z: float, *motion: object) -> None:
-        # stop: the plate never passes the fabric top (it would rest on the yarn knuckles)
+    def plate(z: float | Token, *motion: object, stop: float | Token | None = None) -> None:
+        # stop: the plate never passes the fabric top (it would rest on the yarn knuckles); a z
+        # given as a variable's value needs its stop given alike
+        if stop is None:
+            assert isinstance(z, float)
+            stop = max(0.0, z - p.fabric_top)
         s.command("fix", "plate", "all", "wall/fiber/dlvo", "plane", cx, cy, z, 0.0, 0.0, -1.0,
-                  *motion, "stop", max(0.0, z - p.fabric_top), *plate_words)
+                  *motion, "stop", stop, *plate_words)
 
     def thermo() -> None:
         s.command("thermo_style", "custom", "step", "atoms",
@@ -267,14 +271,18 @@ def build_input(scene: Scene, p: PressPlan) -> str:
         s.command("variable", "servo_step", "equal", "step")
         s.command("print", print_values(SERVO_MARKER, "servo_step", "servo_z"))
         s.command("unfix", "plate")
-        s.command("fix", "plate", "all", "wall/fiber/dlvo", "plane", cx, cy, var_value("servo_z"), 0.0, 0.0,
-                  -1.0, "servo", p.area, pr.plate_speed_m_s, pr.band, *sched, "stop", var_value("servo_stop"),
-                  *plate_words)
+        plate(var_value("servo_z"), "servo", p.area, pr.plate_speed_m_s, pr.band, *sched,
+              stop=var_value("servo_stop"))
         thermo()
         chunks(p.move_steps, True)
     s.label(END_LABEL)
     s.command("write_restart", file_token(RESTART_NAME))
     return s.render()
+
+
+def has_marker(log: str, marker: str) -> bool:
+    """True if a line of the log is the marker (a ``print`` of jump_if_at_least)."""
+    return any(line.strip() == marker for line in log.splitlines())
 
 
 def servo_start(log: str) -> tuple[int, float] | None:
@@ -418,7 +426,7 @@ class Press(Stage):
         key = self.log_key(ctx, work / LOG_NAME)
         wall = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
         log = (work / LOG_NAME).read_text(errors="replace")
-        if any(line.strip() == GUARD_MARKER for line in log.splitlines()):
+        if has_marker(log, GUARD_MARKER):
             rows = thermo_rows(log)
             last = dict(zip(COLUMNS, rows[-1])) if rows else {}
             # overlap added by the press, per kind (m): the guard's measure
@@ -439,15 +447,14 @@ class Press(Stage):
             guard_stop = f"stopped by the overlap guard (overlap_action stop): {what}"
         else:
             guard_stop = ""
-        self._collect(ctx, h5, tmp, p, work, yarns, wall, guard_stop)
+        self._collect(ctx, h5, tmp, p, work, yarns, wall, log, guard_stop)
 
     def _collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], p: PressPlan,
-                 work: Path, yarns: Yarns, wall: float, guard_stop: str = "") -> None:
+                 work: Path, yarns: Yarns, wall: float, log_text: str, guard_stop: str = "") -> None:
         scene = ctx.scene
         pr, dom, f = scene.press, scene.domain, scene.fibers
         assert pr is not None and dom is not None and f is not None
         pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
-        log_text = (work / LOG_NAME).read_text(errors="replace")
         rows = np.array(thermo_rows(log_text), dtype=float)
         if rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
             raise StageError(f"{work / LOG_NAME}: no thermo table of {len(COLUMNS)} columns")
@@ -459,13 +466,13 @@ class Press(Stage):
         step0 = int(step[0])
         steps = step - step0
         t = steps * p.dt
+        start = servo_start(log_text) if pr.mode == "pressure" else None
         if pr.mode == "velocity":
             moving = steps <= p.move_steps
             plate_z = np.where(moving, p.z0 - col["disp"], p.z_end - col["disp"])
             t_contact = np.where(moving, 1.0, -1.0)
         else:
             # the approach's plate (from z0), then the servo's (from where the approach ended)
-            start = servo_start(log_text)
             servo = steps > (start[0] - step0) if start is not None else np.zeros(len(steps), bool)
             z_servo = start[1] if start is not None else math.nan
             plate_z = np.where(servo, z_servo - col["disp"], p.z0 - col["disp"])
@@ -567,8 +574,7 @@ class Press(Stage):
         rg.attrs["stopped_by_guard"] = int(bool(guard_stop))
         approach_line = []
         if pr.mode == "pressure":
-            reached = any(line.strip() == CONTACT_MARKER for line in log_text.splitlines())
-            start = servo_start(log_text)
+            reached = has_marker(log_text, CONTACT_MARKER)
             rg.attrs["contact_pressure_Pa"] = p.contact_pressure
             rg.attrs["contact_pressure_reached"] = int(reached)
             rg.attrs["servo_start_z_m"] = start[1] if start is not None else math.nan
