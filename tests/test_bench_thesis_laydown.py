@@ -4,8 +4,6 @@ reference sheet) against hand-computed values of a two-fiber sheet."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -14,17 +12,12 @@ import numpy as np
 import pytest
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
+from bench_scripts import load_bench_script
 
 
 @pytest.fixture(scope="module")
 def bench() -> Any:
-    spec = importlib.util.spec_from_file_location("run_thesis", ROOT / "bench" / "laydown" / "run_thesis.py")
-    assert spec and spec.loader
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["run_thesis"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench_script("bench/laydown/run_thesis.py", "run_thesis")
 
 
 def write_run(d: Path, shift_m: float = 0.0) -> None:

@@ -265,7 +265,14 @@ def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
                         "implicit_force newton"], "ascend"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 velocity 0 0 1e-3 "
                         "servo 1e-6 5e-3 1 1 0 1 implicit_force newton"], "exclude each other"),
-                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 stop -1e-6"], "stop needs")]:
+                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 stop -1e-6"], "stop needs"),
+                      # the friction's stick factor: its range, newton mode only, not between fibers
+                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 friction 0.5 friction_stick 0.5 "
+                        "implicit_force newton"], "friction_stick must be in"),
+                      (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 friction 0.5 friction_stick 10 "
+                        "implicit_force impulse"], "friction_stick acts inside the Newton solve only"),
+                      (["pair_style fiber/dlvo implicit_force newton friction_stick 10", "pair_coeff * *"],
+                       "friction_stick acts against walls")]:
         case = implicit_case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3,
                              dt=1e-6, steps=1, commands=cmds)
         with pytest.raises(RuntimeError, match=msg):

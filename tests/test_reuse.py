@@ -15,7 +15,6 @@ taken over only where the stage runner then skips them.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 from typing import Any
@@ -30,9 +29,9 @@ from fiberform.reuse import adopt_stages
 from fiberform.scene import parse_scene
 from fiberform.stages import STAGES, StageContext
 
+from bench_scripts import load_bench_script
 from test_campaign import TINY_BASE, tiny_point
 
-ROOT = Path(__file__).resolve().parents[1]
 QUICK = [STAGES["generate"], STAGES["fabric"]]
 
 
@@ -94,10 +93,7 @@ def test_copied_stages_are_skipped(tmp_path: Path, monkeypatch: pytest.MonkeyPat
 def test_run_thesis_donor_stages(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, build_dir: Path) -> None:
     """bench/laydown/run_thesis.py takes over another variant's stages through adopt_stages, from
     any working directory (its scenes' output folders are relative to the repository root)."""
-    spec = importlib.util.spec_from_file_location("run_thesis_reuse", ROOT / "bench" / "laydown" / "run_thesis.py")
-    assert spec and spec.loader
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_bench_script("bench/laydown/run_thesis.py", "run_thesis_reuse")
     runs = tmp_path / "root" / "runs"
     runs.mkdir(parents=True)
     monkeypatch.chdir(tmp_path / "root")

@@ -154,6 +154,14 @@ BAD: dict[str, Bad] = {
     "cross_field_vdw_needs_hamaker": Bad(
         GOOD + "contact:\n  model: fiber_dlvo\n  terms: [vdw]\n", ("contact.hamaker_J", "vdw")
     ),
+    "cross_field_friction_stick_needs_friction": Bad(
+        GOOD + FIBERS + "laydown:\n  yarn_contact: newton\n  friction_stick: 10.0\n",
+        ("laydown.friction_stick", "friction_coefficient > 0"),
+    ),
+    "friction_stick_range": Bad(
+        GOOD + FIBERS + "laydown:\n  friction_coefficient: 0.5\n  friction_stick: 0.5\n",
+        ("laydown.friction_stick", "1 <= x <= 10000"),
+    ),
     "stage_check_timestep_too_large": Bad(
         replace("timestep_s: 1.0e-6", "timestep_s: 1.0e-4"), ("run.timestep_s", "contact")
     ),

@@ -40,7 +40,7 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "beam_integrator": "explicit", "rho_inf": 0.8, "newton_tolerance": 1.0e-9,
         "newton_max_iterations": 40, "damping_time_s": 1.0e-6, "yarn_contact": "newton",
         "restart_interval_s": 1.0e-3, "ranks": 2, "fiber_contact": "newton",
-        "settle_mass_fraction": 0.99, "tangent_steps": 50,
+        "settle_mass_fraction": 0.99, "tangent_steps": 50, "friction_stick": 10.0,
     },
     "coupling": {"mode": "two_way", "interval": 250, "timeout_s": 60.0, "reaction": "off",
                  "fluid_ranks": 2},
@@ -57,7 +57,10 @@ LAUNCH = {("laydown", "ranks")}
 # fields that configure the coupled launch (one mpirun for fiberdem and fiberPimpleFoam)
 COUPLED_LAUNCH = {("coupling", "fluid_ranks")}
 # laydown fields that act only together with other laydown values (set in both renderings)
-NEEDS: dict[tuple[str, str], dict[str, object]] = {("laydown", "settle_mass_fraction"): {"settle_measure": "fiber"}}
+NEEDS: dict[tuple[str, str], dict[str, object]] = {
+    ("laydown", "settle_mass_fraction"): {"settle_measure": "fiber"},
+    ("laydown", "friction_stick"): {"yarn_contact": "newton", "friction_coefficient": 0.5},
+}
 # coupling fields other than mode only act with mode two_way: their base scene is two-way
 TWO_WAY_BASE = {"mode": "two_way"}
 

@@ -28,6 +28,14 @@ Variants (``--variants``):
   loose_nofines
            loose with fiber_generation.fines_fraction 0 (the same injected mass, all of it in
            fibers; issue 15, open question (b))
+  loose_frictionless
+           loose with laydown.friction_coefficient 0: no Coulomb friction on yarns and side planes,
+           as the thesis' law (sec. 2.4, normal forces only); the case scenes add 0.5
+  loose_stick10, loose_stick1, loose_stick1000
+           loose with laydown.friction_stick 10 / 1 / 1000 instead of 100: the regularised yarn
+           friction's stick damping c_stick = k m_eff / dt softer (a speed option: fewer Newton
+           iterations; a stuck point creeps 100 / k times faster) or stiffer (the convergence of
+           the sheet in k)
   two_way, loose_two_way
            newton / loose with coupling.mode two_way (issue 13): fiberPimpleFoam on one more process
            next to the --ranks fiber ranks, the drag reaction exchanged every coupling.interval
@@ -66,7 +74,7 @@ import yaml
 from fiberform.campaign import use_fiber_contact
 from fiberform.fiber_sheet import product_thickness_above_fabric
 from fiberform.products import read_sheet
-from fiberform.provenance import atomic_write_text, machine_info
+from fiberform.provenance import append_result_rows, atomic_write_text, machine_info
 from fiberform.reuse import adopt_stages
 from fiberform.scene import load_scene
 from fiberform.stages import StageContext
@@ -88,6 +96,13 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # issue 15's open questions (a) and (b), each against ``loose`` (the thesis' sec. 5.2)
     "loose_soft": {**LOOSE, "fibers.youngs_modulus_Pa": 10.0e9 / 3.0, "fibers.shear_modulus_Pa": 4.0e9 / 3.0},
     "loose_nofines": {**LOOSE, "fiber_generation.fines_fraction": 0.0},
+    # the thesis' contact law has no tangential force (sec. 2.4): the case scenes' Coulomb friction
+    # on yarns and side planes (0.5) switched off
+    "loose_frictionless": {**LOOSE, "laydown.friction_coefficient": 0.0},
+    # speed option: a softer stick of the regularised yarn friction (laydown.friction_stick, default 100)
+    "loose_stick10": {**LOOSE, "laydown.friction_stick": 10.0},
+    "loose_stick1": {**LOOSE, "laydown.friction_stick": 1.0},
+    "loose_stick1000": {**LOOSE, "laydown.friction_stick": 1000.0},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
@@ -262,8 +277,7 @@ def main() -> int:
                         row["versus_reference"] = compare(row, refs[-1])
                     rows.append(row)
                     print(json.dumps({k: v for k, v in row.items() if k != "machine"}), flush=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(args.out, json.dumps({"rows": old + rows}, indent=2) + "\n")
+    append_result_rows(args.out, rows)
     print(f"wrote {args.out}")
     return 0 if all(r.get("exit") == 0 for r in rows) else 1
 

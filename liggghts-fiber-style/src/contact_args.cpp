@@ -65,6 +65,11 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
     lmp->error->all(FLERR, "implicit_force: expected position | impulse | newton");
   }
   if (!std::strcmp(kw, "friction")) { c.friction = num(1, false); return 2; }
+  if (!std::strcmp(kw, "friction_stick")) {
+    c.friction_stick = num(1);
+    c.friction_stick_set = true;
+    return 2;
+  }
   if (!std::strcmp(kw, "rtol")) { c.rtol = num(1); return 2; }
   if (!std::strcmp(kw, "atol")) { c.atol = num(1); return 2; }
   if (!std::strcmp(kw, "terms")) {
@@ -158,6 +163,9 @@ void validate_contact_config(LAMMPS *lmp, const char *style, EngineConfig &c) {
   if (!(c.rtol > 0 && c.rtol < 1)) fail("rtol must be in (0, 1)");
   if (c.npoints > 100000) fail("points: at most 100000 per element");
   if (!(c.friction >= 0)) fail("friction must be >= 0");
+  if (!(c.friction_stick >= 1.0 && c.friction_stick <= 1.0e6)) fail("friction_stick must be in [1, 1e6]");
+  if (c.friction_stick_set && !c.implicit_newton)
+    fail("friction_stick acts inside the Newton solve only: it needs implicit_force newton");
 }
 
 }  // namespace fiberform

@@ -52,6 +52,10 @@ struct EngineConfig {
   // Coulomb friction coefficient against static bodies (fix wall/fiber/dlvo, fix wall/fiber/yarns;
   // physics/friction.h averaged, physics/static_bodies.h inside the Newton solve); 0: none
   double friction = 0.0;
+  // inside the Newton solve only: the stick damping of the regularised friction, c_stick =
+  // friction_stick m_eff / dt (physics/static_bodies.h); a stuck point creeps at F_t / c_stick
+  double friction_stick = 100.0;
+  bool friction_stick_set = false;
 };
 
 struct EngineStats {

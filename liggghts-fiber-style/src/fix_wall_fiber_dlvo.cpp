@@ -98,7 +98,8 @@ void FixWallFiberDlvo::init() {
     bodies_.add_plane(plane0_.point, plane0_.normal, plane0_.velocity);
     newton_law_ = engine_->cfg.law;
     newton_law_.steric.s1_damping = true;  // the PD servo, as fix wall/fiber/yarns (docs/models/contact.md 8)
-    model_ = std::make_unique<fiberform::physics::StaticContactModel>(bodies_, newton_law_, engine_->cfg.friction);
+    model_ = std::make_unique<fiberform::physics::StaticContactModel>(bodies_, newton_law_, engine_->cfg.friction,
+                                                                         engine_->cfg.friction_stick);
     model_->track_stiffness(area_ > 0);  // the servo's gain bound
   }
   if (beam_) beam_->use_force_model(model_.get(), newton_);

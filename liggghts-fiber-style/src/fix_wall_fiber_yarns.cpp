@@ -143,7 +143,7 @@ void FixWallFiberYarns::init() {
   }
   MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, world);
   bodies_.build_bins(glob[0] + law().h_cut + glob[1]);
-  if (newton_ && !model_) model_ = std::make_unique<phys::StaticContactModel>(bodies_, law(), cfg.friction);
+  if (newton_ && !model_) model_ = std::make_unique<phys::StaticContactModel>(bodies_, law(), cfg.friction, cfg.friction_stick);
   beam_->use_force_model(model_.get(), newton_);
   // the contact force uses the other forces on the node: they must be summed before this fix (not
   // with newton: the contacts act inside the fiber's solve)

@@ -118,13 +118,13 @@ void test_drop_on_yarns(double h, double r) {
 
 // A fiber lying on a plane (normal +z) under a normal load a_n and a tangential load a_t along x:
 // friction mu holds it for a_t < mu a_n and lets it accelerate at a_t - mu a_n above.
-void test_friction(double at_over_an) {
+void test_friction(double at_over_an, double stick = StaticContactModel::kStick) {
   const double r = 10e-6, L = 0.4e-3, an = 2000.0, mu = 0.5, h = 1e-5;
   StaticBodies b;
   b.add_plane({0, 0, 0}, {0, 0, 1});
   Fiber f = make_fiber(8, L, r, 0.6 * r, Vec3{0, 0, r + 0.4e-9});
   ContactLaw law;
-  StaticContactModel model(b, law, mu);
+  StaticContactModel model(b, law, mu, stick);
   std::vector<rod::NodeForceModel *> models{&model};
   for (rod::Node &nd : f.nodes) nd.F = {at_over_an * an * nd.m, 0, -an * nd.m};
   rod::Options opt;
@@ -147,14 +147,18 @@ void test_friction(double at_over_an) {
   expect(ok, "friction: every step converges");
   const double dx = f.nodes[4].x.x - x0;
   if (at_over_an < mu) {
-    // regularised stick: creep at F_t / c_stick = a_t h / kStick per contact point
-  const double creep = 0.3 * an * h / StaticContactModel::kStick * T;
-  expect(std::fabs(dx) < 2.0 * creep, "friction holds below mu N (creep after 2 ms, m)", dx, creep);
+    // regularised stick: creep at F_t / c_stick = a_t h / stick per contact point
+    const double creep = at_over_an * an * h / stick * T;
+    char what[160];
+    std::snprintf(what, sizeof what, "friction holds below mu N, stick factor %g: creeps at F_t / c_stick (2 ms, m)",
+                  stick);
+    expect(std::fabs(dx) < 2.0 * creep && std::fabs(dx) > 0.5 * creep, what, dx, creep);
   } else {
     const double want = 0.5 * (at_over_an - mu) * an * T * T;
     expect(std::fabs(dx / want - 1.0) < 0.02, "friction: slides at (F_t - mu N)/M", dx, want);
   }
-  std::printf("friction F_t/N = %.2f, mu = %.2f: displacement %.4e m after %.0e s\n", at_over_an, mu, dx, T);
+  std::printf("friction F_t/N = %.2f, mu = %.2f, stick factor %g: displacement %.4e m after %.0e s\n", at_over_an,
+              mu, stick, dx, T);
 }
 
 }  // namespace
@@ -166,6 +170,8 @@ int main() {
     for (double r : {5e-6, 12e-6}) test_drop_on_yarns(h, r);
   test_drop_on_yarns(1e-6, 50e-6);
   test_friction(0.3);
+  test_friction(0.3, 10.0);  // keyword friction_stick: a softer stick creeps faster
   test_friction(0.8);
+  test_friction(0.8, 10.0);  // ... and slides alike
   return fiberform::check::finish("test_static_bodies");
 }

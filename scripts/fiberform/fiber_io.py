@@ -184,6 +184,12 @@ def read_nodes_file(path: Path) -> npt.NDArray[np.float64]:
     return np.array([r + [math.nan] * (width - len(r)) for r in rows])
 
 
+def fibers_in_nodes(path: Path) -> set[int]:
+    """0-based indices of the fibers a nodes file lists (its fiber-ID column is 1-based)."""
+    return {int(body[1]) - 1 for line in Path(path).read_text().splitlines()
+            if (body := line.split("#", 1)[0].split())}
+
+
 def write_nodes_subset(src: Path, dst: Path, fiber_ids: Sequence[int]) -> int:
     """Copy the nodes file ``src`` to ``dst`` keeping only the fibers whose 0-based index is in
     ``fiber_ids`` (the nodes file's fiber-ID column is 1-based), comments kept: the fibers left in

@@ -45,10 +45,15 @@ def contact_integrator_words(ld: Any) -> list[object]:
 
 def static_body_words(ld: Any) -> list[object]:
     """The keywords that make yarns (and the ``fiber_yarns`` side planes) act as the laydown
-    section sets them: law terms, integrator, implicit_force mode, Coulomb friction."""
-    return ["terms", ident_list(ld.terms), *contact_integrator_words(ld),
-            "implicit_force", "newton" if ld.yarn_contact_mode == "newton" else "impulse",
-            "friction", ld.friction_coefficient]
+    section sets them: law terms, integrator, implicit_force mode, Coulomb friction (and its stick
+    damping inside the Newton solve)."""
+    newton = ld.yarn_contact_mode == "newton"
+    words: list[object] = ["terms", ident_list(ld.terms), *contact_integrator_words(ld),
+                           "implicit_force", "newton" if newton else "impulse",
+                           "friction", ld.friction_coefficient]
+    if newton and ld.friction_coefficient > 0.0:
+        words += ["friction_stick", ld.friction_stick]
+    return words
 
 
 def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:

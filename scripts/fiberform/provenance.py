@@ -160,3 +160,11 @@ def write_dataset(
     ds.attrs["units"] = units
     ds.attrs["description"] = description
     return ds
+
+
+def append_result_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    """Append ``rows`` to the ``rows`` list of the JSON results file ``path`` (created with its
+    folder when missing; written through a rename: a killed benchmark leaves the old file)."""
+    old = json.loads(path.read_text()).get("rows", []) if path.is_file() else []
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps({"rows": old + rows}, indent=2) + "\n")

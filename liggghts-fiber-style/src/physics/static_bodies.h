@@ -18,7 +18,8 @@
    fiber/dlvo law, F(h, u) n with u = n.v_point (physics/contact_law.h, the same law and parameters as
    pair_style fiber/dlvo; reduced mass = the point's effective mass 1/(w_a^2/m_a + w_b^2/m_b)), and
    optionally Coulomb friction regularised at the velocity scale where it stops the point within a
-   step (f_t = -mu F v_t / sqrt(|v_t|^2 + v_eps^2), v_eps = mu F / c_stick, c_stick = kStick m / h).
+   step (f_t = -mu F v_t / sqrt(|v_t|^2 + v_eps^2), v_eps = mu F / c_stick, c_stick = k m / h with the
+   stick factor k, keyword friction_stick, default kStick = 100).
    Tangent: dF/dh n n^T (position) and dF/du n n^T (velocity), central differences of the scalar law,
    the geometric stiffness of the rotating normal left out (it is F/|d| against dF/dh); friction by its
    secant coefficient. The correction limiter keeps one Newton iteration from moving a contact gap
@@ -221,9 +222,11 @@ class StaticBodies {
 // body's), its tangent, and the correction limiter.
 class BodyContactModel : public rod::NodeForceModel {
  public:
-  static constexpr double kStick = 100.0;  // stick damping c_stick = kStick m / h
+  static constexpr double kStick = 100.0;  // default stick damping factor: c_stick = kStick m / h
 
-  BodyContactModel(const ContactLaw &law, double friction) : law_(law), mu_(friction) {}
+  // friction: Coulomb coefficient; stick: the stick damping factor (c_stick = stick m / h, > 0)
+  BodyContactModel(const ContactLaw &law, double friction, double stick = kStick)
+      : law_(law), mu_(friction), stick_(stick) {}
 
   void begin_step(const std::vector<rod::Node> &, double, double h) override { h_ = h; }
 
@@ -320,7 +323,7 @@ class BodyContactModel : public rod::NodeForceModel {
     Vec3 vt;
     if (mu_ > 0.0 && f > 0.0 && h_ > 0.0) {
       vt = v - u * hit.n;
-      const double c_stick = kStick / (inv_m * h_);
+      const double c_stick = stick_ / (inv_m * h_);
       const double v_eps = mu_ * f / c_stick;
       cf = mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
       fp = fp - cf * vt;
@@ -353,6 +356,7 @@ class BodyContactModel : public rod::NodeForceModel {
 
   const ContactLaw &law_;
   double mu_ = 0.0;
+  double stick_ = kStick;
   double h_ = 0.0;
 
  private:
@@ -375,8 +379,9 @@ class BodyContactModel : public rod::NodeForceModel {
 // Contact of one fiber with the static bodies inside its implicit step (see the file comment).
 class StaticContactModel : public BodyContactModel {
  public:
-  StaticContactModel(const StaticBodies &bodies, const ContactLaw &law, double friction)
-      : BodyContactModel(law, friction), bodies_(bodies) {}
+  StaticContactModel(const StaticBodies &bodies, const ContactLaw &law, double friction,
+                     double stick = kStick)
+      : BodyContactModel(law, friction, stick), bodies_(bodies) {}
 
   void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
     reset();

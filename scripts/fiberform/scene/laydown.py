@@ -65,6 +65,14 @@ class LaydownSection(_Section):
         "fiber/dlvo law)", "1", default=0.0,
         ge=0.0, le=10.0,
     )  # fmt: skip
+    friction_stick: float = quantity(
+        "Stick damping factor k of the regularised friction inside the Newton solve (keyword "
+        "friction_stick of fix wall/fiber/yarns and fix wall/fiber/dlvo): a stuck contact point "
+        "creeps at F_t / c_stick, c_stick = k m_eff / timestep_s. Smaller is a speed option "
+        "(fewer Newton iterations, faster creep; docs/bench/laydown.md); only with yarn_contact "
+        "newton and friction_coefficient > 0", "1", default=100.0,
+        ge=1.0, le=1.0e4,
+    )  # fmt: skip
     contact_integrator: Literal["cvode", "substep"] = choice(
         "Sub-integration of each fiber-yarn and fiber-wall contact: cvode (as pair_style "
         "fiber/dlvo, the thesis' method) or substep (contact_substeps velocity-Verlet sub-steps)",
@@ -149,6 +157,10 @@ class LaydownSection(_Section):
         if self.contact_integrator == "cvode" and "contact_substeps" in self.model_fields_set:
             raise scene_problem("contact_substeps", "only used with contact_integrator substep",
                                 self.contact_substeps)
+        if "friction_stick" in self.model_fields_set and (
+                self.yarn_contact_mode != "newton" or self.friction_coefficient == 0.0):
+            raise scene_problem("friction_stick", "only used with yarn_contact newton and "
+                                "friction_coefficient > 0", self.friction_stick)
         if self.ranks > 1 and self.yarn_contact_mode != "newton":
             raise scene_problem("ranks", "more than one rank needs yarn_contact newton (the "
                                 "sub-integrated yarn contact needs both nodes of an element on one "

@@ -42,7 +42,7 @@ import numpy.typing as npt
 
 from ..coupling_map import MAP_NAME, ExchangeGrid, exchange_map, write_exchange_map
 from ..errors import StageError
-from ..fiber_io import NODES_NAME, fiber_preamble, write_nodes_subset
+from ..fiber_io import NODES_NAME, fiber_preamble, fibers_in_nodes, write_nodes_subset
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
     mass_fraction_speed, pair_options, product_thickness_above_fabric, sheet_thickness,
@@ -407,7 +407,7 @@ class Laydown(Stage):
         # LIGGGHTS fiber IDs are 1-based (fiber_io first_fiber_id); fibers.h5 indices 0-based
         fid = np.rint(last.columns["f_beam[1]"]).astype(np.int64) - 1
         present = np.unique(fid)
-        removed_ids = sorted({int(i) - 1 for m in _REMOVED.finditer(log) for i in m.group(2).split()})
+        removed_ids = sorted(removed_fibers(log))
         on_sheet = np.zeros(n_fib, dtype=bool)
         on_sheet[present] = True
         removed = np.zeros(n_fib, dtype=bool)
@@ -733,16 +733,20 @@ def prepare_resume(work: Path, step: int) -> None:
             (work / f"{RESTART_STEM}.{s}.{RESTART_EXT}").unlink()
 
 
+def removed_fibers(log: str, up_to_step: int | None = None) -> set[int]:
+    """0-based indices of the fibers that fix fiber/remove reports removed in a lay-down log (at
+    steps up to and including ``up_to_step`` when given)."""
+    return {int(i) - 1 for m in _REMOVED.finditer(log)
+            if up_to_step is None or int(m.group(1)) <= up_to_step for i in m.group(2).split()}
+
+
 def nodes_left(work: Path, nodes: Path) -> None:
     """The working folder's nodes file of a resumed run: the fibers of ``nodes`` (the generated
     fibers) less those removed up to the restart step (the log lines prepare_resume kept): fix
     fiber/beam wants every fiber it lists to be in the restart file."""
     earlier = work / EARLIER_LOG
-    text = earlier.read_text(errors="replace") if earlier.is_file() else ""
-    removed = {int(i) - 1 for m in _REMOVED.finditer(text) for i in m.group(2).split()}
-    fibers = {int(line.split("#", 1)[0].split()[1]) - 1 for line in nodes.read_text().splitlines()
-              if line.split("#", 1)[0].split()}
-    write_nodes_subset(nodes, work / NODES_NAME, sorted(fibers - removed))
+    removed = removed_fibers(earlier.read_text(errors="replace") if earlier.is_file() else "")
+    write_nodes_subset(nodes, work / NODES_NAME, sorted(fibers_in_nodes(nodes) - removed))
 
 
 def json_list(items: list[str]) -> str:
