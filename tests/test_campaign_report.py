@@ -238,6 +238,19 @@ def test_permeability_figure_plots_the_hand_values() -> None:
     assert sem_exp.y.tolist() == [310, 255, 175]
 
 
+def test_every_panel_starts_at_zero() -> None:
+    """Both quantities are >= 0; each panel shows them from zero (a panel of a few close points,
+    e.g. the SEM fiber-count panel of one case point, would otherwise autoscale a spread of a few
+    CFM to the whole panel height)."""
+    for q in cr.QUANTITIES:
+        fig, drawn = cr.figure(DATA, SHEETS, q)
+        for ax, key in zip(fig.axes, [(c, a) for c in cr.CONVENTIONS for a in cr.AXES]):
+            if drawn[key]:
+                lo, hi = ax.get_ylim()
+                top = max(float(np.max(s.y)) for s in drawn[key])
+                assert lo == 0.0 and hi >= top, (q, key, lo, hi)
+
+
 def test_thickness_figure_in_um() -> None:
     fig, drawn = cr.figure(DATA, SHEETS, "thickness")
     exp = drawn[("direct", "mass")][0]

@@ -211,6 +211,11 @@ def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Fi
             ax.grid(alpha=0.3)
             if panel:
                 ax.legend(fontsize=7)
+                # both quantities are >= 0: every panel shows them from zero, so that a spread of
+                # a few CFM among close points is not drawn across the whole panel
+                top = max(float(np.max(np.asarray(s.y) + (0.0 if s.yerr is None else np.asarray(s.yerr))))
+                          for s in panel)
+                ax.set_ylim(bottom=0.0, top=max(1.08 * top, 1.0))
     fig.suptitle(f"{q.label}: experiment vs simulation (error bars: sd over seeds){_pressure_note(data)}"
                  + (f"\n{q.definition}" if q.definition else ""), fontsize=11)
     fig.tight_layout()
