@@ -31,6 +31,9 @@ Variants (``--variants``):
   loose_frictionless
            loose with laydown.friction_coefficient 0: no Coulomb friction on yarns and side planes,
            as the thesis' law (sec. 2.4, normal forces only); the case scenes add 0.5
+  loose_steric
+           loose with the steric term only against fibers, yarns and planes (a speed option: no
+           colloidal terms)
   loose_stick10, loose_stick1, loose_stick1000
            loose with laydown.friction_stick 10 / 1 / 1000 instead of 100: the regularised yarn
            friction's stick damping c_stick = k m_eff / dt softer (a speed option: fewer Newton
@@ -103,6 +106,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "loose_stick10": {**LOOSE, "laydown.friction_stick": 10.0},
     "loose_stick1": {**LOOSE, "laydown.friction_stick": 1.0},
     "loose_stick1000": {**LOOSE, "laydown.friction_stick": 1000.0},
+    # speed option: the steric term only (no van der Waals, no electrostatics), fibers and yarns
+    "loose_steric": {**LOOSE, "laydown.terms": ["steric"], "contact.terms": ["steric"]},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
