@@ -46,7 +46,7 @@ from typing import Any
 
 import yaml
 
-from fiberform.fiber_io import NODES_NAME, fibers_in_nodes, write_nodes_subset
+from fiberform.fiber_io import NODES_NAME
 from fiberform.inputs import LiggghtsInput, fix_ref
 from fiberform.liggghts_log import thermo_rows
 from fiberform.provenance import append_result_rows, atomic_write_text, file_hash, machine_info
@@ -103,11 +103,9 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
         raise SystemExit(f"--step: no restart file {restart}")
     folder = out_root / f"{run.name}-{step}-mu{mu:g}-k{stick if stick is not None else 'scene'}"
     folder.mkdir(parents=True, exist_ok=True)
-    # the generated fibers less those removed before the restart (fix fiber/beam wants every fiber
-    # it lists in the restart file), as the stage's own resume writes them
-    log = (work / "log.fiberdem").read_text(errors="replace")
-    write_nodes_subset(work / NODES_NAME, folder / NODES_NAME,
-                       sorted(fibers_in_nodes(work / NODES_NAME) - laydown.removed_fibers(log, step)))
+    # the generated fibers less those removed up to the restart, as the stage's own resume writes them
+    laydown.write_nodes_left(work / NODES_NAME, folder / NODES_NAME,
+                             (work / "log.fiberdem").read_text(errors="replace"), step)
     for name in (*COPIED, restart.name):
         target = folder / name
         if target.is_symlink() or target.exists():

@@ -740,13 +740,18 @@ def removed_fibers(log: str, up_to_step: int | None = None) -> set[int]:
             if up_to_step is None or int(m.group(1)) <= up_to_step for i in m.group(2).split()}
 
 
+def write_nodes_left(nodes: Path, dst: Path, log: str, up_to_step: int | None = None) -> None:
+    """``dst``: the fibers of the nodes file ``nodes`` less those the lay-down log reports removed
+    (up to and including ``up_to_step`` when given): the nodes file that goes with a restart file,
+    since fix fiber/beam wants every fiber it lists to be in the restart file."""
+    write_nodes_subset(nodes, dst, sorted(fibers_in_nodes(nodes) - removed_fibers(log, up_to_step)))
+
+
 def nodes_left(work: Path, nodes: Path) -> None:
     """The working folder's nodes file of a resumed run: the fibers of ``nodes`` (the generated
-    fibers) less those removed up to the restart step (the log lines prepare_resume kept): fix
-    fiber/beam wants every fiber it lists to be in the restart file."""
+    fibers) less those removed up to the restart step (the log lines prepare_resume kept)."""
     earlier = work / EARLIER_LOG
-    removed = removed_fibers(earlier.read_text(errors="replace") if earlier.is_file() else "")
-    write_nodes_subset(nodes, work / NODES_NAME, sorted(fibers_in_nodes(nodes) - removed))
+    write_nodes_left(nodes, work / NODES_NAME, earlier.read_text(errors="replace") if earlier.is_file() else "")
 
 
 def json_list(items: list[str]) -> str:
