@@ -39,6 +39,11 @@ Variants (``--variants``):
            friction's stick damping c_stick = k m_eff / dt softer (a speed option: fewer Newton
            iterations; a stuck point creeps 100 / k times faster) or stiffer (the convergence of
            the sheet in k)
+  loose_dt2, loose_dt5
+           loose with the fiber time step laydown.timestep_s 2 / 5 us instead of 1 us, and
+           laydown.friction_stick 200 / 500 so that the stick damping c_stick = k m_eff / dt stays
+           that of the case scenes (a speed option if the sheet does not change: fewer steps, each
+           needing more Newton iterations)
   two_way, loose_two_way
            newton / loose with coupling.mode two_way (issue 13): fiberPimpleFoam on one more process
            next to the --ranks fiber ranks, the drag reaction exchanged every coupling.interval
@@ -108,6 +113,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "loose_stick1000": {**LOOSE, "laydown.friction_stick": 1000.0},
     # speed option: the steric term only (no van der Waals, no electrostatics), fibers and yarns
     "loose_steric": {**LOOSE, "laydown.terms": ["steric"], "contact.terms": ["steric"]},
+    # the fiber time step 2 / 5 us instead of 1 us, the friction's stick damping c_stick = k m_eff / dt
+    # kept (k scaled with dt): is 1 us set by accuracy, or can the implicit fibers take longer steps?
+    "loose_dt2": {**LOOSE, "laydown.timestep_s": 2.0e-6, "laydown.friction_stick": 200.0},
+    "loose_dt5": {**LOOSE, "laydown.timestep_s": 5.0e-6, "laydown.friction_stick": 500.0},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)

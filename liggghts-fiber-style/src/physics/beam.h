@@ -199,28 +199,19 @@ struct ElementRef {
   Vec3 gamma0;    // reference (material) strain Gamma0
   Vec3 kappa0;    // reference curvature/twist kappa0, 1/m
 };
-inline Quat mid_rotation(Quat qA, Quat qB, Vec3 *theta_out = nullptr) {
-  const Vec3 th = qlog(qmul(qconj(qA), qB));
-  if (theta_out) *theta_out = th;
-  return qmul(qA, qexp(0.5 * th));
-}
-// Reference strains of an element from its stress-free configuration.
-inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
-  ElementRef r;
-  Vec3 th;
-  const Quat qm = mid_rotation(qA, qB, &th);
-  const Vec3 d = xB - xA;
-  r.L0 = norm(d);
-  r.gamma0 = (1.0 / r.L0) * qrot_t(qm, d) - Vec3{0, 0, 1};
-  r.kappa0 = (1.0 / r.L0) * th;
-  return r;
-}
-
 struct ElementForces {
   Vec3 fA, fB;  // forces on the nodes, N
   Vec3 tA, tB;  // torques on the nodes (space frame), N m
   double energy = 0;  // stored energy, J
   double dissipation = 0;  // damping power (>= 0), W
+};
+
+// Derivatives of an element's nodal forces and torques (space frame) with respect to the chord
+// d = x_B - x_A, the only way the translations enter them: column j is d(.)/d d_j. Since
+// f_B = -f_A, its derivative is minus dfA. Used for the translational columns of the implicit
+// element tangent (physics/implicit_rod.h), unit-tested against finite differences.
+struct ElementChordGradient {
+  Vec3 dfA[3], dtA[3], dtB[3];
 };
 
 struct NodeState {
@@ -230,12 +221,64 @@ struct NodeState {
   Vec3 w;  // angular velocity, space frame (damping only)
 };
 
-// Forces of one element. t_damp = 0: elastic only (velocities unused).
+// The relative rotation of an element and every SO(3) quantity its forces need, from one atan2
+// and square roots. With q = q_A^* q_B = (cos(f/2), sin(f/2) n) (sign chosen so that w >= 0):
+// theta = log(q) (as qlog), exp(theta/2) = sqrt(q) = (c, v / (2c)) with c = sqrt((1 + w)/2), and
+// the coefficients of J_l at f and at f/2 from cos f = 1 - 2 s^2, sin f = 2 s w, cos(f/2) = w,
+// sin(f/2) = s (s = |v|): the same values as qexp(theta/2) and jacobian_coeffs(f),
+// jacobian_coeffs(f/2) to rounding (tests/test_beam.cpp), without their six sin/cos calls.
+struct RelativeRotation {
+  Vec3 th;               // theta, |theta| = f in [0, pi]
+  Quat half;             // exp(theta/2): the mid rotation is q_A half
+  JacobianCoeffs k;      // of J_l(theta)
+  JacobianCoeffs k_half; // of J_l(theta/2)
+};
+inline RelativeRotation relative_rotation(Quat qA, Quat qB) {
+  Quat q = qmul(qconj(qA), qB);
+  if (q.w < 0) q = {-q.w, -q.x, -q.y, -q.z};
+  RelativeRotation r;
+  r.th = qlog(q);
+  const Vec3 v{q.x, q.y, q.z};
+  const double s = norm(v), w = q.w;
+  const double c = std::sqrt(0.5 * (1.0 + w));  // cos(f/4), w >= 0: c >= 1/sqrt(2)
+  r.half = {c, 0.5 / c * q.x, 0.5 / c * q.y, 0.5 / c * q.z};
+  const double f = norm(r.th);
+  if (f < 1e-3) {
+    r.k = jacobian_coeffs(f);  // series: no trig either
+  } else {
+    const double f2 = f * f;
+    r.k = {2.0 * s * s / f2, (f - 2.0 * s * w) / (f2 * f), (1.0 - 0.5 * f * w / s) / f2};
+  }
+  const double g = 0.5 * f;
+  if (g < 1e-3) {
+    r.k_half = jacobian_coeffs(g);
+  } else {
+    const double g2 = g * g, one_minus_w = s * s / (1.0 + w);  // 1 - cos g without cancellation
+    r.k_half = {one_minus_w / g2, (g - s) / (g2 * g), (1.0 - 0.5 * g * s / one_minus_w) / g2};
+  }
+  return r;
+}
+
+// Reference strains of an element from its stress-free configuration.
+inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
+  ElementRef r;
+  const RelativeRotation rr = relative_rotation(qA, qB);
+  const Quat qm = qmul(qA, rr.half);  // mid rotation
+  const Vec3 d = xB - xA;
+  r.L0 = norm(d);
+  r.gamma0 = (1.0 / r.L0) * qrot_t(qm, d) - Vec3{0, 0, 1};
+  r.kappa0 = (1.0 / r.L0) * rr.th;
+  return r;
+}
+
+// Forces of one element. t_damp = 0: elastic only (velocities unused). grad (optional): their
+// derivatives with respect to the chord x_B - x_A (ElementChordGradient).
 inline ElementForces element_forces(const NodeState &A, const NodeState &B, const ElementRef &ref,
-                                    const Stiffness &C, double t_damp = 0.0) {
+                                    const Stiffness &C, double t_damp = 0.0, ElementChordGradient *grad = nullptr) {
   ElementForces out;
-  Vec3 th;
-  const Quat qm = mid_rotation(A.q, B.q, &th);
+  const RelativeRotation rr = relative_rotation(A.q, B.q);
+  const Vec3 &th = rr.th;
+  const Quat qm = qmul(A.q, rr.half);
   const Vec3 d = B.x - A.x;
   const double L0 = ref.L0;
   const Vec3 gamma = (1.0 / L0) * qrot_t(qm, d) - Vec3{0, 0, 1} - ref.gamma0;
@@ -244,23 +287,28 @@ inline ElementForces element_forces(const NodeState &A, const NodeState &B, cons
   const Vec3 M = hadamard(C.CK, kappa);
   out.energy = 0.5 * L0 * (dot(N, gamma) + dot(M, kappa));
 
-  const Vec3 n = qrot(qm, N);
-  const Vec3 m = qrot(A.q, jl_inv_t(th, M));
-  const Vec3 u = cross(d, n);
+  // J_l(th)^-T v and J_l(th/2)^T v (see jl_inv_t, jl_t)
+  auto jlinvt = [&](Vec3 x) { return apply_so3(th, 0.5, rr.k.c, x); };
+  const Vec3 th2 = 0.5 * th;
   // P u = 1/2 R_A J_l(th)^-T J_l(th/2)^T R_A^T u
-  const Vec3 Pu = qrot(A.q, 0.5 * jl_inv_t(th, jl_t(0.5 * th, qrot_t(A.q, u))));
+  auto P = [&](Vec3 u) { return qrot(A.q, 0.5 * jlinvt(apply_so3(th2, -rr.k_half.a, rr.k_half.b, qrot_t(A.q, u)))); };
+  const Vec3 n = qrot(qm, N);
+  const Vec3 m = qrot(A.q, jlinvt(M));
+  const Vec3 u = cross(d, n);
+  const Vec3 Pu = P(u);
   out.fA = n;
   out.fB = -1.0 * n;
   out.tA = u - Pu + m;
   out.tB = Pu - m;
 
+  Vec3 wm, nd;
   if (t_damp > 0.0) {
-    const Vec3 wm = 0.5 * (A.w + B.w);
+    wm = 0.5 * (A.w + B.w);
     const Vec3 gdot = (1.0 / L0) * qrot_t(qm, B.v - A.v - cross(wm, d));
     const Vec3 kdot = (1.0 / L0) * qrot_t(qm, B.w - A.w);
     const Vec3 Nd = t_damp * hadamard(C.CG, gdot);
     const Vec3 Md = t_damp * hadamard(C.CK, kdot);
-    const Vec3 nd = qrot(qm, Nd);
+    nd = qrot(qm, Nd);
     const Vec3 md = qrot(qm, Md);
     const Vec3 half = 0.5 * cross(d, nd);
     out.fA = out.fA + nd;
@@ -268,6 +316,27 @@ inline ElementForces element_forces(const NodeState &A, const NodeState &B, cons
     out.tA = out.tA + md + half;
     out.tB = out.tB - md + half;
     out.dissipation = L0 * (dot(Nd, gdot) + dot(Md, kdot));
+  }
+  if (grad) {
+    // dn = R_m C_G R_m^T e / L0; du = e x n + d x dn; damping: dnd = -t_d/L0 R_m C_G R_m^T (w_m x e),
+    // dhalf = (e x nd + d x dnd)/2; the couple m does not depend on d.
+    for (int j = 0; j < 3; ++j) {
+      Vec3 e{};
+      e[j] = 1.0;
+      const Vec3 dn = (1.0 / L0) * qrot(qm, hadamard(C.CG, qrot_t(qm, e)));
+      const Vec3 du = cross(e, n) + cross(d, dn);
+      const Vec3 dPu = P(du);
+      grad->dfA[j] = dn;
+      grad->dtA[j] = du - dPu;
+      grad->dtB[j] = dPu;
+      if (t_damp > 0.0) {
+        const Vec3 dnd = (-t_damp / L0) * qrot(qm, hadamard(C.CG, qrot_t(qm, cross(wm, e))));
+        const Vec3 dhalf = 0.5 * (cross(e, nd) + cross(d, dnd));
+        grad->dfA[j] = grad->dfA[j] + dnd;
+        grad->dtA[j] = grad->dtA[j] + dhalf;
+        grad->dtB[j] = grad->dtB[j] + dhalf;
+      }
+    }
   }
   return out;
 }

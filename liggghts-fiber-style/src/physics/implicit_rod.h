@@ -345,48 +345,46 @@ class Stepper {
   }
 
   // 12 residual components of one element's internal forces (sign: -force, rotations in the body
-  // frame of each node).
+  // frame of each node); grad (optional): the forces' derivatives with respect to the chord, for
+  // element_tangent.
   static void element_residual(const beam::NodeState &A, const beam::NodeState &B, const Element &el,
-                               double t_damp, double out[12]) {
-    const beam::ElementForces f = beam::element_forces(A, B, el.ref, el.C, t_damp);
+                               double t_damp, double out[12], beam::ElementChordGradient *grad = nullptr) {
+    const beam::ElementForces f = beam::element_forces(A, B, el.ref, el.C, t_damp, grad);
     const Vec3 ta = beam::qrot_t(A.q, f.tA), tb = beam::qrot_t(B.q, f.tB);
     const Vec3 parts[4] = {f.fA, ta, f.fB, tb};
     for (int p = 0; p < 4; ++p)
       for (int c = 0; c < 3; ++c) out[3 * p + c] = -parts[p][c];
   }
 
-  // Element tangent (12 x 12, row-major) d(residual)/d(dx_A, dth_A, dx_B, dth_B) by forward
-  // differences from the residual r0 at the current state (translations spatial, rotations
-  // body-frame right perturbations). The element forces depend on the translations only through
-  // d = x_B - x_A (and v_B - v_A), so the x_B columns are minus the x_A ones: 9 element
-  // evaluations (3 x_A, 3 + 3 rotations). Truncation error O(step): relative 1e-7 here, far below
-  // what modified Newton tolerates (central differences cost twice as much for no measurable
-  // change in iterations).
+  // Element tangent (12 x 12, row-major) d(residual)/d(dx_A, dth_A, dx_B, dth_B) at the current
+  // state (translations spatial, rotations body-frame right perturbations). The element forces
+  // depend on the translations only through the chord d = x_B - x_A (and v_B - v_A): the x_A
+  // columns are the analytic chord derivatives g (beam::ElementChordGradient, with the residual's
+  // sign and body frames: d r / d x_A = +d F / d d), the x_B columns minus them. The 6 rotation
+  // columns are forward differences from the residual r0 (6 element evaluations; truncation error
+  // O(step): relative 1e-7 here, far below what modified Newton tolerates; central differences
+  // cost twice as much for no measurable change in iterations).
   static void element_tangent(const beam::NodeState &A, const beam::NodeState &B, const Element &el,
-                              double t_damp, const double r0[12], double K[144]) {
-    const double hx = 1e-7 * el.ref.L0;  // m
-    const double hr = 1e-7;              // rad
+                              double t_damp, const double r0[12], const beam::ElementChordGradient &g,
+                              double K[144]) {
+    for (int j = 0; j < 3; ++j) {
+      const Vec3 col[4] = {g.dfA[j], beam::qrot_t(A.q, g.dtA[j]), -1.0 * g.dfA[j], beam::qrot_t(B.q, g.dtB[j])};
+      for (int p = 0; p < 4; ++p)
+        for (int c = 0; c < 3; ++c) {
+          K[(3 * p + c) * 12 + j] = col[p][c];
+          K[(3 * p + c) * 12 + 6 + j] = -col[p][c];
+        }
+    }
+    const double hr = 1e-7;  // rad
     double rp[12];
-    for (int c = 0; c < 12; ++c) {
-      if (c >= 6 && c < 9) {  // x_B: minus the x_A column
-        for (int r = 0; r < 12; ++r) K[r * 12 + c] = -K[r * 12 + c - 6];
-        continue;
-      }
+    for (int c : {3, 4, 5, 9, 10, 11}) {
       beam::NodeState Ap = A, Bp = B;
       beam::NodeState &P = c < 6 ? Ap : Bp;
-      const int k = c % 6;
-      double step;
-      if (k < 3) {
-        step = hx;
-        P.x[k] += hx;
-      } else {
-        step = hr;
-        Vec3 d{};
-        d[k - 3] = hr;
-        P.q = beam::qmul(P.q, beam::qexp(d));
-      }
+      Vec3 d{};
+      d[c % 6 - 3] = hr;
+      P.q = beam::qmul(P.q, beam::qexp(d));
       element_residual(Ap, Bp, el, t_damp, rp);
-      const double inv = 1.0 / step;
+      const double inv = 1.0 / hr;
       for (int r = 0; r < 12; ++r) K[r * 12 + c] = (rp[r] - r0[r]) * inv;
     }
   }
@@ -615,13 +613,13 @@ class Stepper {
       for (std::size_t e = 0; e + 1 < n; ++e) {
         if (!nodes[e].next) continue;  // the last node of a fiber in a cluster
         const beam::NodeState &A = ns_[e], &B = ns_[e + 1];
-        element_residual(A, B, elems[e], opt.t_damp, re);
+        element_residual(A, B, elems[e], opt.t_damp, re, tangent ? &chord_ : nullptr);
         for (int r = 0; r < 6; ++r) {
           rhs_[e * 6 + r] += re[r];
           rhs_[(e + 1) * 6 + r] += re[6 + r];
         }
         if (!tangent) continue;
-        element_tangent(A, B, elems[e], opt.t_damp, re, Ke);
+        element_tangent(A, B, elems[e], opt.t_damp, re, chord_, Ke);
         // the rotation corrections act through q = q_n exp(h dQ): chain rule with the right
         // Jacobian of SO(3) at the current increment (the tangent operator T(h dQ) of Bruels et al.)
         right_jacobian_columns(Ke, 3, h * dQw_[e]);
@@ -904,6 +902,7 @@ class Stepper {
   std::vector<Vec3> dQx_, dQw_, lastdx_, lastdth_;
   std::vector<double> rhs_;
   std::vector<beam::NodeState> ns_;  // the nodes' states as the element sees them, at the current iterate
+  beam::ElementChordGradient chord_;  // the element's chord derivatives when a tangent is formed
   bool started_held_ = false;  // the current attempt started on a held tangent
   Tangent tg_;  // the iteration matrix in use (exchanged with the caller's in step())
 };
