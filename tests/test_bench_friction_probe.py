@@ -56,6 +56,14 @@ def test_frictionless_setting_has_no_stick(probe: Any, run: Path) -> None:
         assert line.endswith("friction 0.0"), line
 
 
+def test_anderson_reaches_the_beam_fix(probe: Any, run: Path) -> None:
+    """--anderson M puts `anderson M` on fix fiber/beam; without it the keyword is absent."""
+    beam = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0, 3), "fiber/beam")
+    assert len(beam) == 1 and " anderson 3" in beam[0], beam
+    plain = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0), "fiber/beam")
+    assert " anderson " not in plain[0], plain
+
+
 def test_probe_must_fit_the_chunks(probe: Any, run: Path) -> None:
     with pytest.raises(SystemExit, match="multiples"):
         probe.probe_input(run, 4000, 310, 50, 0.5, 10.0)

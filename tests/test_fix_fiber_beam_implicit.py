@@ -101,8 +101,10 @@ def test_torsion_twist_angle(fiberdem_build: Path, tmp_path: Path) -> None:
     assert twist == pytest.approx(T * L / (G_WALL * J), rel=0.01)
 
 
-def test_cantilever_large_tip_load_elastica(fiberdem_build: Path, tmp_path: Path) -> None:
-    """F L^2 / (E I) = 3, dt = 1e-5 s: tip position vs the elastica (scipy) within 3 %."""
+@pytest.mark.parametrize("anderson", [0, 3])
+def test_cantilever_large_tip_load_elastica(fiberdem_build: Path, tmp_path: Path, anderson: int) -> None:
+    """F L^2 / (E I) = 3, dt = 1e-5 s: tip position vs the elastica (scipy) within 3 %; also with
+    Anderson mixing of the Newton corrections (keyword anderson)."""
     L, n, w = 1e-3, 21, 10e-6
     sec = ellipse_section(w, w)
     EI = E_WALL * sec["I1"]
@@ -112,7 +114,7 @@ def test_cantilever_large_tip_load_elastica(fiberdem_build: Path, tmp_path: Path
     dt = 1e-5
     case = implicit_case(
         [straight_chain(n, L, [w, w, 0, 0])], [-5e-4, -2e-4, -1e-4], [5e-4, 1.2e-3, 1.2e-3],
-        dt=dt, steps=max(300, int(40 * tau / dt)), fix_options=f"drag {tau!r} clamp clamp",
+        dt=dt, steps=max(300, int(40 * tau / dt)), fix_options=f"drag {tau!r} clamp clamp anderson {anderson}",
         commands=[f"group tip id {n}", f"fix load tip addforce 0 {F!r} 0"], thermo_every=100)
     r = run_case(fiberdem_build, tmp_path, case, pre_fix=["group clamp id 1"])
     y_ref, z_ref = elastica_tip(load, L)
@@ -247,6 +249,15 @@ def test_tangent_steps_range(fiberdem_build: Path, tmp_path: Path) -> None:
                              dt=1e-6, steps=1, fix_options=f"tangent_steps {value}")
         with pytest.raises(RuntimeError, match=r"tangent_steps' must be an integer in \[1, 100000\]"):
             run_case(fiberdem_build, tmp_path / f"ts{value}", case)
+
+
+def test_anderson_range(fiberdem_build: Path, tmp_path: Path) -> None:
+    """anderson (mixing depth of the Newton corrections) takes an integer in [0, 8]."""
+    for value in ("-1", "9"):
+        case = implicit_case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3,
+                             dt=1e-6, steps=1, fix_options=f"anderson {value}")
+        with pytest.raises(RuntimeError, match=r"anderson' must be an integer in \[0, 8\]"):
+            run_case(fiberdem_build, tmp_path / f"aa{value}", case)
 
 
 def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
@@ -500,12 +511,13 @@ def test_plane_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path, dt:
     assert np.linalg.norm(fin[:, 4:7], axis=1).max() < 1e-3 * u_flow
 
 
-@pytest.mark.parametrize("dt,width,element", [
-    (1e-6, 10e-6, 20e-6), (1e-5, 10e-6, 20e-6), (1e-4, 10e-6, 20e-6),
-    (1e-6, 100e-6, 200e-6), (1e-5, 100e-6, 200e-6), (1e-4, 100e-6, 200e-6),
+@pytest.mark.parametrize("dt,width,element,anderson", [
+    (1e-6, 10e-6, 20e-6, 0), (1e-5, 10e-6, 20e-6, 0), (1e-4, 10e-6, 20e-6, 0),
+    (1e-6, 100e-6, 200e-6, 0), (1e-5, 100e-6, 200e-6, 0), (1e-4, 100e-6, 200e-6, 0),
+    (1e-5, 10e-6, 20e-6, 3), (1e-4, 100e-6, 200e-6, 3),
 ])
 def test_fiber_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path, dt: float, width: float,
-                                            element: float) -> None:
+                                            element: float, anderson: int) -> None:
     """pair_style fiber/dlvo and fix wall/fiber/dlvo `implicit_force newton` (the two crossing fibers
     solved together in one Newton solve with their contact, docs/models/contact.md section 9): the
     upper fiber pressed by a 20 mm/s downward flow onto the lower one, which lies on the plane, at
@@ -513,7 +525,8 @@ def test_fiber_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path
     1e-5 and 1e-4 s, 100 um at 1e-4 s). After 30 ms: no NaN, no blow-up (every node slower than
     10 % of the flow), the lower fiber on the plane and the upper one on the lower one where they
     cross, both within 1 % of the radius of touching (closed form: centres r and 3 r above the
-    plane). Not asserted: rest. Measured after 30 ms: below 2e-5 m/s at 1e-6 s; the upper fiber's
+    plane); also with Anderson mixing of the Newton corrections (anderson 3) at two of the steps.
+    Not asserted: rest. Measured after 30 ms: below 2e-5 m/s at 1e-6 s; the upper fiber's
     free ends still move at 3e-5 m/s (10 um, 1e-5 s), 8e-5 m/s (100 um, 1e-5 s) and 1.7e-3 m/s
     (100 um, 1e-4 s) while they sag under the flow."""
     fibs = _crossing_pair(width, element)
@@ -523,6 +536,7 @@ def test_fiber_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path
     steps = round(0.03 / dt)  # 30 ms
     case = implicit_case(
         fibs, [-0.6 * L, -0.6 * L, -r], [0.6 * L, 0.6 * L, 6 * r + 5e-6], dt=dt, steps=steps, newton="on",
+        fix_options=f"anderson {anderson}",
         commands=[f"fix drag all fiber/drag flow uniform 0 0 {-u_flow!r}",
                   "fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms steric implicit_force newton",
                   "pair_style fiber/dlvo terms steric implicit_force newton", "pair_coeff * *"],

@@ -162,6 +162,13 @@ BAD: dict[str, Bad] = {
         GOOD + FIBERS + "laydown:\n  friction_coefficient: 0.5\n  friction_stick: 0.5\n",
         ("laydown.friction_stick", "1 <= x <= 10000"),
     ),
+    "cross_field_anderson_needs_implicit": Bad(
+        GOOD + FIBERS + "laydown:\n  beam_integrator: explicit\n  anderson_depth: 3\n",
+        ("laydown.anderson_depth", "beam_integrator implicit"),
+    ),
+    "anderson_depth_range": Bad(
+        GOOD + FIBERS + "laydown:\n  anderson_depth: 9\n", ("laydown.anderson_depth", "0 <= x <= 8"),
+    ),
     "stage_check_timestep_too_large": Bad(
         replace("timestep_s: 1.0e-6", "timestep_s: 1.0e-4"), ("run.timestep_s", "contact")
     ),

@@ -16,6 +16,9 @@ reports:
   (``f_beam[19]``, ``f_beam[20]``: counted since the fix was defined, i.e. over the probe);
 * the largest Newton iterations of one fiber in a step (``f_beam[15]`` at the thermo steps).
 
+``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections) in every
+probe.
+
 The probes run one after another unless ``--parallel 2`` (then the loop times are loaded: compare
 the iteration counts, which do not depend on the load). Rows are appended to
 ``bench/laydown/results/friction_probe.json``; the folders go to ``runs/probes/``.
@@ -73,10 +76,14 @@ def parse_setting(text: str) -> tuple[float, float | None]:
     return mu, stick
 
 
-def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: float | None) -> str:
-    """The lay-down's resumed input with the setting, ``steps`` steps in runs of ``chunk``."""
+def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: float | None,
+                anderson: int = 0) -> str:
+    """The lay-down's resumed input with the setting, ``steps`` steps in runs of ``chunk``
+    (``anderson``: laydown.anderson_depth, 0 = the scene's)."""
     data = yaml.safe_load((run / "scene.yaml").read_text())
     set_field(data, "laydown.ranks", 1)
+    if anderson:
+        set_field(data, "laydown.anderson_depth", anderson)
     set_field(data, "laydown.friction_coefficient", mu)
     if stick is not None and mu > 0.0:
         set_field(data, "laydown.friction_stick", stick)
@@ -95,13 +102,15 @@ def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: 
     return "\n".join(lines) + "\n"
 
 
-def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path) -> dict[str, Any]:
+def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
+              anderson: int = 0) -> dict[str, Any]:
     mu, stick = parse_setting(setting)
     work = run / "laydown" / "work"
     restart = work / f"laydown.{step}.restart"
     if not restart.is_file():
         raise SystemExit(f"--step: no restart file {restart}")
-    folder = out_root / f"{run.name}-{step}-mu{mu:g}-k{stick if stick is not None else 'scene'}"
+    folder = out_root / (f"{run.name}-{step}-mu{mu:g}-k{stick if stick is not None else 'scene'}"
+                         + (f"-aa{anderson}" if anderson else ""))
     folder.mkdir(parents=True, exist_ok=True)
     # the generated fibers less those removed up to the restart, as the stage's own resume writes them
     laydown.write_nodes_left(work / NODES_NAME, folder / NODES_NAME,
@@ -114,7 +123,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
             shutil.copyfile(restart, target)
         else:
             target.symlink_to((work / name).resolve())
-    atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick))
+    atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick, anderson))
     fiberdem = build / "bin" / "fiberdem"
     t0 = time.perf_counter()
     proc = subprocess.run([str(fiberdem), "-in", "in.probe", "-log", "log.probe"], cwd=folder,
@@ -123,7 +132,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     log = (folder / "log.probe").read_text() if (folder / "log.probe").is_file() else ""
     rows = [r for r in thermo_rows(log) if r[0] > step]
     row: dict[str, Any] = {"run": str(run), "step": step, "steps": steps, "friction": mu,
-                           "friction_stick": stick if mu > 0.0 else None, "exit": proc.returncode,
+                           "friction_stick": stick if mu > 0.0 else None, "anderson": anderson,
+                           "exit": proc.returncode,
                            "wall_s": wall, "folder": str(folder), "fiberdem": file_hash(fiberdem)}
     if proc.returncode != 0 or not rows:
         row["error"] = proc.stderr[-2000:]
@@ -149,6 +159,8 @@ def main() -> int:
     ap.add_argument("--chunk", type=int, default=50, help="steps per run command (thermo interval)")
     ap.add_argument("--settings", nargs="+", default=["0.5:100", "0.5:10", "0.5:1", "0:100"],
                     help="FRICTION:STICK pairs (laydown.friction_coefficient, laydown.friction_stick)")
+    ap.add_argument("--anderson", type=int, default=0, choices=range(9), metavar="M",
+                    help="laydown.anderson_depth of every probe (0: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
     ap.add_argument("--probes", type=Path, default=Path("runs") / "probes")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "friction_probe.json")
@@ -162,7 +174,7 @@ def main() -> int:
     load = os.getloadavg()[0]
     with ThreadPoolExecutor(max_workers=args.parallel) as pool:
         rows = list(pool.map(lambda s: run_probe(args.run, args.step, args.steps, args.chunk, s, build,
-                                                 args.probes), args.settings))
+                                                 args.probes, args.anderson), args.settings))
     for r in rows:
         r["parallel"] = args.parallel
         r["load_average_before"] = load

@@ -44,6 +44,9 @@ Variants (``--variants``):
            laydown.friction_stick 200 / 500 so that the stick damping c_stick = k m_eff / dt stays
            that of the case scenes (a speed option if the sheet does not change: fewer steps, each
            needing more Newton iterations)
+  loose_aa3
+           loose with laydown.anderson_depth 3: Anderson mixing of the implicit Newton corrections
+           (the same tolerance; fewer iterations in piled-up clusters)
   two_way, loose_two_way
            newton / loose with coupling.mode two_way (issue 13): fiberPimpleFoam on one more process
            next to the --ranks fiber ranks, the drag reaction exchanged every coupling.interval
@@ -117,6 +120,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # kept (k scaled with dt): is 1 us set by accuracy, or can the implicit fibers take longer steps?
     "loose_dt2": {**LOOSE, "laydown.timestep_s": 2.0e-6, "laydown.friction_stick": 200.0},
     "loose_dt5": {**LOOSE, "laydown.timestep_s": 5.0e-6, "laydown.friction_stick": 500.0},
+    # solver option: Anderson mixing of the Newton corrections over the last 3 (laydown.anderson_depth)
+    "loose_aa3": {**LOOSE, "laydown.anderson_depth": 3},
 }
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)

@@ -137,6 +137,11 @@ class LaydownSection(_Section):
         "faster, but a resumed run differs at the level of the Newton tolerance, as restart "
         "files do not hold the tangents)", "1", default=1, ge=1, le=100000,
     )  # fmt: skip
+    anderson_depth: int = quantity(
+        "fix fiber/beam anderson: Anderson mixing of the implicit Newton corrections over this many "
+        "earlier ones (0: off; the convergence test is unchanged, so the sheet differs at the level "
+        "of the Newton tolerance; docs/bench/laydown.md measures the speed-up)", "1", default=0, ge=0, le=8,
+    )  # fmt: skip
     damping_time_s: float = quantity(
         "fix fiber/beam Kelvin-Voigt damping time", "s", default=0.0, ge=0.0, le=1.0
     )
@@ -171,6 +176,9 @@ class LaydownSection(_Section):
         if self.yarn_contact == "newton" and self.beam_integrator == "explicit":
             raise scene_problem("yarn_contact", "newton needs beam_integrator implicit (allowed "
                                 "with explicit: averaged)", self.yarn_contact)
+        if self.anderson_depth > 0 and self.beam_integrator == "explicit":
+            raise scene_problem("anderson_depth", "only used with beam_integrator implicit (the "
+                                "Newton solve it accelerates)", self.anderson_depth)
         if self.fiber_contact == "newton" and self.beam_integrator == "explicit":
             raise scene_problem("fiber_contact", "newton needs beam_integrator implicit (allowed "
                                 "with explicit: averaged)", self.fiber_contact)

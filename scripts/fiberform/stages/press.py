@@ -173,7 +173,8 @@ def build_input(scene: Scene, p: PressPlan) -> str:
                    "inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
                    "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
                    "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
-                   "newton_max", ld.newton_max_iterations, "tangent_steps", ld.tangent_steps, restart=file_token(START_NAME),
+                   "newton_max", ld.newton_max_iterations, "tangent_steps", ld.tangent_steps,
+                   *(("anderson", ld.anderson_depth) if ld.anderson_depth else ()), restart=file_token(START_NAME),
                    flat_decomposition=True)
     # quiescent water (thesis sec. 3.5): drag against water at rest, gravity and buoyancy
     s.command("fix", "drag", "all", "fiber/drag", "flow", "uniform", 0.0, 0.0, 0.0,
