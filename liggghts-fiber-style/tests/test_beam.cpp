@@ -232,6 +232,74 @@ void test_chord_gradient() {
   std::printf("  chord gradient check: max rel. error %.2e\n", worst);
 }
 
+// the rotation columns (elastic element): d(forces)/d(body-frame right rotation of q_A, q_B)
+// against central differences, from straight to strongly bent and twisted elements (relative
+// rotations 1e-4 to ~2 rad, so both the series and the closed-form coefficient slopes are used)
+void test_rotation_gradient() {
+  const Section s = hollow_ellipse(12e-6, 5e-6, 6e-6, 2e-6);
+  const Stiffness C = section_stiffness(s, 20e9, 3e9, 5.0 / 6.0);
+  double worst = 0;
+  for (int t = 0; t < 60; ++t) {
+    const double bend = t < 20 ? 1e-4 : (t < 40 ? 0.03 : 1.0);
+    NodeState A, B;
+    A.x = rvec(1e-4);
+    A.q = rquat();
+    B.q = qmul(A.q, qexp(rvec(bend)));
+    B.x = A.x + 5e-5 * (Vec3{0, 0, 1} + rvec(0.3));
+    const ElementRef r = element_reference(A.x, A.q, B.x, B.q);
+    B.x = B.x + rvec(1e-5);
+    A.q = qmul(qexp(rvec(bend)), A.q);
+    B.q = qmul(qexp(rvec(bend)), B.q);
+    ElementChordGradient g;
+    const ElementForces f = element_forces(A, B, r, C, 0.0, &g);
+    expect(g.has_rot, "rotation gradient filled for an elastic element");
+    const double h = 1e-6;
+    const double sf = norm(f.fA) * r.L0 + norm(f.tA) + norm(f.tB) + 1e-300;  // torque scale
+    for (int node = 0; node < 2; ++node)
+      for (int j = 0; j < 3; ++j) {
+        Vec3 e{};
+        e[j] = h;
+        NodeState Ap = A, Am = A, Bp = B, Bm = B;
+        NodeState &P = node ? Bp : Ap, &Mn = node ? Bm : Am;
+        P.q = qmul(P.q, qexp(e));
+        Mn.q = qmul(Mn.q, qexp(-1.0 * e));
+        const ElementForces p = element_forces(Ap, Bp, r, C), m = element_forces(Am, Bm, r, C);
+        const Vec3 *dfA = node ? g.rB_dfA : g.rA_dfA, *dtA = node ? g.rB_dtA : g.rA_dtA, *dtB = node ? g.rB_dtB : g.rA_dtB;
+        const double ef = norm((1.0 / (2 * h)) * (p.fA - m.fA) - dfA[j]) * r.L0 / sf;
+        const double eta = norm((1.0 / (2 * h)) * (p.tA - m.tA) - dtA[j]) / sf;
+        const double etb = norm((1.0 / (2 * h)) * (p.tB - m.tB) - dtB[j]) / sf;
+        worst = std::fmax(worst, std::fmax(ef, std::fmax(eta, etb)));
+      }
+  }
+  expect(worst < 1e-6, "rotation gradient = d(forces)/d(frame rotations) (central differences)", worst, 0);
+  std::printf("  rotation gradient check: max rel. error %.2e\n", worst);
+  // with damping the rotation columns are left to finite differences
+  NodeState A, B;
+  B.x = {0, 0, 5e-5};
+  const ElementRef r = element_reference(A.x, A.q, B.x, B.q);
+  ElementChordGradient g;
+  element_forces(A, B, r, C, 1e-6, &g);
+  expect(!g.has_rot, "no analytic rotation columns with damping");
+}
+
+// the coefficient slopes a'(f)/f, b'(f)/f, c'(f)/f against central differences of the
+// coefficients (reference_coeffs), on both sides of the series threshold
+void test_coefficient_slopes() {
+  double worst = 0;
+  for (double f : {1e-3, 0.02, 0.049, 0.051, 0.2, 1.0, 2.5}) {
+    const double h = 1e-3 * f;  // truncation ~1e-6 relative; round-off ~1e-6 at f = 1e-3
+    const JacobianCoeffs p = reference_coeffs(f + h), m = reference_coeffs(f - h), s = jacobian_coeff_slopes(f);
+    const double num[3] = {(p.a - m.a) / (2 * h) / f, (p.b - m.b) / (2 * h) / f, (p.c - m.c) / (2 * h) / f};
+    const double got[3] = {s.a, s.b, s.c};
+    for (int i = 0; i < 3; ++i) {
+      const double e = std::fabs(got[i] - num[i]) / std::fabs(got[i]);
+      worst = std::fmax(worst, e);
+      expect(e < 1e-5, "J_l coefficient slope", got[i], num[i]);
+    }
+  }
+  std::printf("  coefficient slopes: worst rel. error %.2e\n", worst);
+}
+
 void test_damping() {
   const Section s = hollow_ellipse(10e-6, 10e-6, 0, 0);
   const Stiffness C = section_stiffness(s, 10e9, 4e9, 5.0 / 6.0);
@@ -306,6 +374,8 @@ int main() {
   test_element_gradient();
   test_relative_rotation();
   test_chord_gradient();
+  test_coefficient_slopes();
+  test_rotation_gradient();
   test_damping();
   test_rotation_integrator();
   test_critical_steps();

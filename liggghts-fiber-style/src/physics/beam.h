@@ -212,6 +212,12 @@ struct ElementForces {
 // element tangent (physics/implicit_rod.h), unit-tested against finite differences.
 struct ElementChordGradient {
   Vec3 dfA[3], dtA[3], dtB[3];
+  // Derivatives with respect to body-frame right rotations of the nodes' frames, q_A -> q_A exp(e_j)
+  // (rotA) and q_B -> q_B exp(e_j) (rotB), of f_A, t_A, t_B (space frame; f_B = -f_A). Filled
+  // when the element is elastic (t_damp = 0; with damping has_rot is false).
+  bool has_rot = false;
+  Vec3 rA_dfA[3], rA_dtA[3], rA_dtB[3];
+  Vec3 rB_dfA[3], rB_dtA[3], rB_dtB[3];
 };
 
 struct NodeState {
@@ -259,6 +265,21 @@ inline RelativeRotation relative_rotation(Quat qA, Quat qB) {
   return r;
 }
 
+// a'(f)/f, b'(f)/f, c'(f)/f of the J_l coefficients (JacobianCoeffs), by series below 0.05 rad
+// (truncation < 1e-12 relative) and closed forms above (cancellation < 1e-11 relative there):
+// a = (1 - cos f)/f^2, b = (f - sin f)/f^3, c = (1 - g)/f^2 with g = (f/2) cot(f/2).
+inline JacobianCoeffs jacobian_coeff_slopes(double f) {
+  const double f2 = f * f;
+  if (f < 0.05)
+    return {-1.0 / 12.0 + f2 / 180.0 - f2 * f2 / 6720.0, -1.0 / 60.0 + f2 / 1260.0 - f2 * f2 / 60480.0,
+            1.0 / 360.0 + f2 / 7560.0 + f2 * f2 / 201600.0};
+  const double sf = std::sin(f), cf = std::cos(f), f3 = f2 * f, f4 = f2 * f2;
+  const double sh = std::sin(0.5 * f), th = std::tan(0.5 * f);
+  const double g = 0.5 * f / th, dg = 0.5 / th - 0.25 * f / (sh * sh);
+  const double c = (1.0 - g) / f2;
+  return {sf / f3 - 2.0 * (1.0 - cf) / f4, (1.0 - cf) / f4 - 3.0 * (f - sf) / (f4 * f), -dg / f3 - 2.0 * c / f2};
+}
+
 // Reference strains of an element from its stress-free configuration.
 inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
   ElementRef r;
@@ -269,6 +290,78 @@ inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
   r.gamma0 = (1.0 / r.L0) * qrot_t(qm, d) - Vec3{0, 0, 1};
   r.kappa0 = (1.0 / r.L0) * rr.th;
   return r;
+}
+
+// The rotation columns of ElementChordGradient (elastic element). With the body-frame right
+// rotation e of node A (B), theta changes by -J_l(theta)^-1 e (J_l(theta)^-T e), the mid frame by
+// the body rotation psi = H^T e + J_l(theta/2)^T dtheta/2 (J_l(theta/2)^T dtheta/2), H = exp(theta/2),
+// and R_A (for A) by R_A e^. Then dGamma = (R_m^T d x psi)/L0, dn = R_m (psi x N + C_G dGamma),
+// dkappa = dtheta/L0, m = R_A J_l^-T M and P u = R_A W R_A^T u (W = J_l^-T(theta) J_l^T(theta/2)/2) by
+// the product rule with the directional derivatives of the J_l operators (coefficient slopes from
+// jacobian_coeff_slopes). Tested against central differences of element_forces (test_beam.cpp).
+inline void element_rotation_gradient(Quat qA, Quat qm, const RelativeRotation &rr, Vec3 d, Vec3 N, Vec3 M,
+                                      Vec3 n, Vec3 u, const ElementRef &ref, const Stiffness &C,
+                                      ElementChordGradient *g) {
+  const Vec3 &th = rr.th;
+  const double f = norm(th);
+  const Vec3 th2 = 0.5 * th;
+  const JacobianCoeffs sl = jacobian_coeff_slopes(f), slh = jacobian_coeff_slopes(0.5 * f);
+  const double L0 = ref.L0;
+  // J_l^-T(theta) v, J_l^-1(theta) v, J_l^T(theta/2) v
+  auto Jt = [&](Vec3 v) { return apply_so3(th, 0.5, rr.k.c, v); };
+  auto Jinv = [&](Vec3 v) { return apply_so3(th, -0.5, rr.k.c, v); };
+  auto Jh = [&](Vec3 v) { return apply_so3(th2, -rr.k_half.a, rr.k_half.b, v); };
+  // their directional derivatives in theta along eta
+  auto dJt = [&](Vec3 eta, Vec3 v) {
+    const double dc = sl.c * dot(th, eta);
+    const Vec3 tv = cross(th, v);
+    return 0.5 * cross(eta, v) + dc * cross(th, tv) + rr.k.c * (cross(eta, tv) + cross(th, cross(eta, v)));
+  };
+  auto dJh = [&](Vec3 eta, Vec3 v) {
+    const Vec3 e2 = 0.5 * eta;
+    const double s = 0.25 * dot(th, eta);  // (theta/2).(eta/2)
+    const double da = slh.a * s, db = slh.b * s;
+    const Vec3 tv = cross(th2, v);
+    return -rr.k_half.a * cross(e2, v) - da * tv + db * cross(th2, tv) +
+           rr.k_half.b * (cross(e2, tv) + cross(th2, cross(e2, v)));
+  };
+  const Vec3 bd = qrot_t(qm, d);        // R_m^T d
+  const Vec3 wA = qrot_t(qA, u);        // R_A^T u
+  const Vec3 JtM = Jt(M);
+  const Vec3 Jhw = Jh(wA);
+  const Vec3 Ww = 0.5 * Jt(Jhw);
+  for (int node = 0; node < 2; ++node)
+    for (int j = 0; j < 3; ++j) {
+      Vec3 e{};
+      e[j] = 1.0;
+      Vec3 dth, psi;
+      if (node == 0) {
+        dth = -1.0 * Jinv(e);
+        psi = qrot_t(rr.half, e) + Jh(0.5 * dth);
+      } else {
+        dth = Jt(e);
+        psi = Jh(0.5 * dth);
+      }
+      const Vec3 dN = (1.0 / L0) * hadamard(C.CG, cross(bd, psi));
+      const Vec3 dn = qrot(qm, cross(psi, N) + dN);
+      const Vec3 dM = (1.0 / L0) * hadamard(C.CK, dth);
+      Vec3 dmb = dJt(dth, M) + Jt(dM);  // body (R_A frame) change of J_l^-T M
+      if (node == 0) dmb = dmb + cross(e, JtM);
+      const Vec3 dm = qrot(qA, dmb);
+      const Vec3 du = cross(d, dn);
+      Vec3 dw = qrot_t(qA, du);
+      if (node == 0) dw = dw - cross(e, wA);
+      Vec3 dPb = 0.5 * Jt(Jh(dw)) + 0.5 * dJt(dth, Jhw) + 0.5 * Jt(dJh(dth, wA));
+      if (node == 0) dPb = dPb + cross(e, Ww);
+      const Vec3 dPu = qrot(qA, dPb);
+      Vec3 *dfA = node == 0 ? g->rA_dfA : g->rB_dfA;
+      Vec3 *dtA = node == 0 ? g->rA_dtA : g->rB_dtA;
+      Vec3 *dtB = node == 0 ? g->rA_dtB : g->rB_dtB;
+      dfA[j] = dn;
+      dtA[j] = du - dPu + dm;
+      dtB[j] = dPu - dm;
+    }
+  (void)n;
 }
 
 // Forces of one element. t_damp = 0: elastic only (velocities unused). grad (optional): their
@@ -337,6 +430,8 @@ inline ElementForces element_forces(const NodeState &A, const NodeState &B, cons
         grad->dtB[j] = grad->dtB[j] + dhalf;
       }
     }
+    grad->has_rot = !(t_damp > 0.0);
+    if (grad->has_rot) element_rotation_gradient(A.q, qm, rr, d, N, M, n, u, ref, C, grad);
   }
   return out;
 }

@@ -34,9 +34,9 @@
    kFreshSlack times the contraction the newest freshly formed tangent achieved, at most kSlowCap:
    with secant terms (friction in slip) a new tangent contracts no better than a held one, and
    forming one every iteration doubled the cost of a settled sheet). K_t: the tangent of the
-   internal forces: the translation columns analytic (beam::ElementChordGradient), the rotation
-   columns forward differences of the exact discrete element forces (6 evaluations per
-   element), multiplied by the right Jacobian of SO(3) at the current rotation increment (the
+   internal forces of the exact discrete elements: analytic (beam::ElementChordGradient; with
+   Kelvin-Voigt damping the rotation columns are forward differences, 6 evaluations per element),
+   multiplied by the right Jacobian of SO(3) at the current rotation increment (the
    tangent operator T(h dQ)); C_t: the gyroscopic, drag and damping tangents. S is block
    tridiagonal in the nodes (6 x 6 blocks); it is solved after a
    symmetric diagonal scaling by physics/block_tridiag.h.
@@ -359,6 +359,7 @@ class Stepper {
     return s;
   }
 
+ public:
   // 12 residual components of one element's internal forces (sign: -force, rotations in the body
   // frame of each node); grad (optional): the forces' derivatives with respect to the chord, for
   // element_tangent.
@@ -376,9 +377,9 @@ class Stepper {
   // depend on the translations only through the chord d = x_B - x_A (and v_B - v_A): the x_A
   // columns are the analytic chord derivatives g (beam::ElementChordGradient, with the residual's
   // sign and body frames: d r / d x_A = +d F / d d), the x_B columns minus them. The 6 rotation
-  // columns are forward differences from the residual r0 (6 element evaluations; truncation error
-  // O(step): relative 1e-7 here, far below what modified Newton tolerates; central differences
-  // cost twice as much for no measurable change in iterations).
+  // columns: analytic for elastic elements (g.has_rot), else forward differences from the
+  // residual r0 (6 element evaluations; truncation error O(step): relative 1e-7 here, far below
+  // what modified Newton tolerates). Tested against central differences in test_implicit_rod.cpp.
   static void element_tangent(const beam::NodeState &A, const beam::NodeState &B, const Element &el,
                               double t_damp, const double r0[12], const beam::ElementChordGradient &g,
                               double K[144]) {
@@ -389,6 +390,26 @@ class Stepper {
           K[(3 * p + c) * 12 + j] = col[p][c];
           K[(3 * p + c) * 12 + 6 + j] = -col[p][c];
         }
+    }
+    if (g.has_rot) {
+      // analytic rotation columns (elastic elements): r = -(f_A, R_A^T t_A, f_B, R_B^T t_B); the
+      // node's own frame turns with it: d(R^T t) = R^T dt - e x (R^T t)
+      const Vec3 ta{-r0[3], -r0[4], -r0[5]}, tb{-r0[9], -r0[10], -r0[11]};
+      for (int node = 0; node < 2; ++node)
+        for (int j = 0; j < 3; ++j) {
+          Vec3 e{};
+          e[j] = 1.0;
+          const Vec3 &dfA = node == 0 ? g.rA_dfA[j] : g.rB_dfA[j];
+          Vec3 dta = beam::qrot_t(A.q, node == 0 ? g.rA_dtA[j] : g.rB_dtA[j]);
+          Vec3 dtb = beam::qrot_t(B.q, node == 0 ? g.rA_dtB[j] : g.rB_dtB[j]);
+          if (node == 0) dta = dta - beam::cross(e, ta);
+          else dtb = dtb - beam::cross(e, tb);
+          const Vec3 col[4] = {-1.0 * dfA, -1.0 * dta, dfA, -1.0 * dtb};
+          const int c = node == 0 ? 3 + j : 9 + j;
+          for (int p = 0; p < 4; ++p)
+            for (int q = 0; q < 3; ++q) K[(3 * p + q) * 12 + c] = col[p][q];
+        }
+      return;
     }
     const double hr = 1e-7;  // rad
     double rp[12];
@@ -404,6 +425,7 @@ class Stepper {
     }
   }
 
+ private:
   // K[:, c0..c0+2] <- K[:, c0..c0+2] J_r(th), J_r(th) = J_l(-th) = I - a th^ + b th^2 (12 x 12 K)
   static void right_jacobian_columns(double K[144], int c0, Vec3 th) {
     const double f = beam::norm(th);
