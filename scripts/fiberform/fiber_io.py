@@ -207,6 +207,17 @@ def write_nodes_subset(src: Path, dst: Path, fiber_ids: Sequence[int]) -> int:
     return count
 
 
+def laydown_beam_options(ld: Any) -> tuple[object, ...]:
+    """The fix fiber/beam keywords of a scene's laydown section (the lay-down and the press both
+    integrate the fibers with them); ``anderson`` only when on, so that inputs without it stay
+    as they were."""
+    return ("inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
+            "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
+            "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
+            "newton_max", ld.newton_max_iterations, "tangent_steps", ld.tangent_steps,
+            *(("anderson", ld.anderson_depth) if ld.anderson_depth else ()))
+
+
 def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,
                    restart: Token | None = None, flat_decomposition: bool = False) -> None:
     """The LIGGGHTS commands that load the generated fibers (DATA_NAME, NODES_NAME in the working

@@ -265,6 +265,14 @@ inline RelativeRotation relative_rotation(Quat qA, Quat qB) {
   return r;
 }
 
+// J_l(theta)^-T v, J_l(theta)^-1 v and J_l(theta/2)^T v with the coefficients of a RelativeRotation
+// (the same operators as jl_inv_t, jl_inv and jl_t(theta/2, v), without recomputing them)
+inline Vec3 jl_inv_t(const RelativeRotation &r, Vec3 v) { return apply_so3(r.th, 0.5, r.k.c, v); }
+inline Vec3 jl_inv(const RelativeRotation &r, Vec3 v) { return apply_so3(r.th, -0.5, r.k.c, v); }
+inline Vec3 jl_half_t(const RelativeRotation &r, Vec3 v) {
+  return apply_so3(0.5 * r.th, -r.k_half.a, r.k_half.b, v);
+}
+
 // a'(f)/f, b'(f)/f, c'(f)/f of the J_l coefficients (JacobianCoeffs), by series below 0.05 rad
 // (truncation < 1e-12 relative) and closed forms above (cancellation < 1e-11 relative there):
 // a = (1 - cos f)/f^2, b = (f - sin f)/f^3, c = (1 - g)/f^2 with g = (f/2) cot(f/2).
@@ -300,7 +308,7 @@ inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
 // the product rule with the directional derivatives of the J_l operators (coefficient slopes from
 // jacobian_coeff_slopes). Tested against central differences of element_forces (test_beam.cpp).
 inline void element_rotation_gradient(Quat qA, Quat qm, const RelativeRotation &rr, Vec3 d, Vec3 N, Vec3 M,
-                                      Vec3 n, Vec3 u, const ElementRef &ref, const Stiffness &C,
+                                      Vec3 u, const ElementRef &ref, const Stiffness &C,
                                       ElementChordGradient *g) {
   const Vec3 &th = rr.th;
   const double f = norm(th);
@@ -308,9 +316,9 @@ inline void element_rotation_gradient(Quat qA, Quat qm, const RelativeRotation &
   const JacobianCoeffs sl = jacobian_coeff_slopes(f), slh = jacobian_coeff_slopes(0.5 * f);
   const double L0 = ref.L0;
   // J_l^-T(theta) v, J_l^-1(theta) v, J_l^T(theta/2) v
-  auto Jt = [&](Vec3 v) { return apply_so3(th, 0.5, rr.k.c, v); };
-  auto Jinv = [&](Vec3 v) { return apply_so3(th, -0.5, rr.k.c, v); };
-  auto Jh = [&](Vec3 v) { return apply_so3(th2, -rr.k_half.a, rr.k_half.b, v); };
+  auto Jt = [&](Vec3 v) { return jl_inv_t(rr, v); };
+  auto Jinv = [&](Vec3 v) { return jl_inv(rr, v); };
+  auto Jh = [&](Vec3 v) { return jl_half_t(rr, v); };
   // their directional derivatives in theta along eta
   auto dJt = [&](Vec3 eta, Vec3 v) {
     const double dc = sl.c * dot(th, eta);
@@ -361,7 +369,6 @@ inline void element_rotation_gradient(Quat qA, Quat qm, const RelativeRotation &
       dtA[j] = du - dPu + dm;
       dtB[j] = dPu - dm;
     }
-  (void)n;
 }
 
 // Forces of one element. t_damp = 0: elastic only (velocities unused). grad (optional): their
@@ -380,13 +387,10 @@ inline ElementForces element_forces(const NodeState &A, const NodeState &B, cons
   const Vec3 M = hadamard(C.CK, kappa);
   out.energy = 0.5 * L0 * (dot(N, gamma) + dot(M, kappa));
 
-  // J_l(th)^-T v and J_l(th/2)^T v (see jl_inv_t, jl_t)
-  auto jlinvt = [&](Vec3 x) { return apply_so3(th, 0.5, rr.k.c, x); };
-  const Vec3 th2 = 0.5 * th;
   // P u = 1/2 R_A J_l(th)^-T J_l(th/2)^T R_A^T u
-  auto P = [&](Vec3 u) { return qrot(A.q, 0.5 * jlinvt(apply_so3(th2, -rr.k_half.a, rr.k_half.b, qrot_t(A.q, u)))); };
+  auto P = [&](Vec3 u) { return qrot(A.q, 0.5 * jl_inv_t(rr, jl_half_t(rr, qrot_t(A.q, u)))); };
   const Vec3 n = qrot(qm, N);
-  const Vec3 m = qrot(A.q, jlinvt(M));
+  const Vec3 m = qrot(A.q, jl_inv_t(rr, M));
   const Vec3 u = cross(d, n);
   const Vec3 Pu = P(u);
   out.fA = n;
@@ -431,7 +435,7 @@ inline ElementForces element_forces(const NodeState &A, const NodeState &B, cons
       }
     }
     grad->has_rot = !(t_damp > 0.0);
-    if (grad->has_rot) element_rotation_gradient(A.q, qm, rr, d, N, M, n, u, ref, C, grad);
+    if (grad->has_rot) element_rotation_gradient(A.q, qm, rr, d, N, M, u, ref, C, grad);
   }
   return out;
 }

@@ -636,8 +636,8 @@ class Stepper {
       }
       if (!tangent && it == 0 && have_models && !(model_change(nodes, gp, wc) <= kModelChange)) tangent = true;
       since_tangent = tangent ? 1 : since_tangent + 1;
-      if (tangent) aa_reset();  // Anderson mixing: the history belongs to one iteration matrix
       if (tangent) {
+        aa_reset();  // Anderson mixing: the history belongs to one iteration matrix
         ++st.tangents;
         if (it == 0) started_held_ = false;
         tg_.age = -1;  // none held until this one is factored (remember_tangent)

@@ -42,7 +42,7 @@ import numpy.typing as npt
 
 from ..coupling_map import MAP_NAME, ExchangeGrid, exchange_map, write_exchange_map
 from ..errors import StageError
-from ..fiber_io import NODES_NAME, fiber_preamble, fibers_in_nodes, write_nodes_subset
+from ..fiber_io import NODES_NAME, fiber_preamble, fibers_in_nodes, laydown_beam_options, write_nodes_subset
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
     mass_fraction_speed, pair_options, product_thickness_above_fabric, sheet_thickness,
@@ -162,11 +162,7 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     restart = (file_token(f"{RESTART_STEM}.{int(resume_step)}.{RESTART_EXT}")
                if resume_step is not None else None)
     fiber_preamble(s, f, scene.contact is not None,
-                   "inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
-                   "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
-                   "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
-                   "newton_max", ld.newton_max_iterations, "tangent_steps", ld.tangent_steps,
-                   *(("anderson", ld.anderson_depth) if ld.anderson_depth else ()), restart=restart,
+                   *laydown_beam_options(ld), restart=restart,
                    flat_decomposition=True)
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
