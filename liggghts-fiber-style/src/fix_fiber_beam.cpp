@@ -297,6 +297,10 @@ void FixFiberBeam::section_radii(int i, double r[4]) const {
   for (int k = 0; k < 4; ++k) r[k] = node_[i][A1 + k];
 }
 
+double FixFiberBeam::contact_reach(int i) const {
+  return contact_rect(i) ? std::hypot(node_[i][A1], node_[i][A2]) : contact_radius(i);
+}
+
 /* ---------------------------------------------------------------------- 
    nodes file: one line per node,
      atom-ID fiber-ID node-index node-count a1 a2 b1 b2 x0 y0 z0 q0w q0x q0y q0z [qw qx qy qz]
@@ -845,7 +849,7 @@ namespace {
 enum SendCol {
   S_TAG = 0, S_FID, S_IDX, S_CNT, S_X, S_Q = S_X + 3, S_V = S_Q + 4, S_W = S_V + 3, S_ACC = S_W + 3,
   S_M = S_ACC + 12, S_J, S_F = S_J + 3, S_T = S_F + 3, S_D = S_T + 3, S_FIXED = S_D + 6, S_ACCOK, S_SCALE,
-  S_HASREF, S_L0, S_G0, S_K0 = S_G0 + 3, S_CG = S_K0 + 3, S_CK = S_CG + 3, S_SRC = S_CK + 3, S_N
+  S_RECT, S_HASREF = S_RECT + 2, S_L0, S_G0, S_K0 = S_G0 + 3, S_CG = S_K0 + 3, S_CK = S_CG + 3, S_SRC = S_CK + 3, S_N
 };
 // return record layout
 enum RecvCol { R_TAG = 0, R_DX, R_Q = R_DX + 3, R_V = R_Q + 4, R_W = R_V + 3, R_ACC = R_W + 3, R_FI = R_ACC + 12,
@@ -926,6 +930,8 @@ void FixFiberBeam::implicit_step() {
       b[S_FIXED] = (clamp_groupbit_ && (mask[i] & clamp_groupbit_)) ? 1.0 : 0.0;
       b[S_ACCOK] = p[ACCOK];
       b[S_SCALE] = contact_radius(i);
+      b[S_RECT] = contact_rect(i) ? p[A1] : 0.0;
+      b[S_RECT + 1] = contact_rect(i) ? p[A2] : 0.0;
       b[S_HASREF] = p[HASREF];
       b[S_L0] = p[L0];
       b[S_SRC] = comm->me;
@@ -1029,6 +1035,8 @@ void FixFiberBeam::implicit_step() {
         nd.fixed = b[S_FIXED] > 0.5;
         nd.scale = b[S_SCALE];
         nd.radius = b[S_SCALE];
+        nd.rect[0] = b[S_RECT];
+        nd.rect[1] = b[S_RECT + 1];
         if (b[S_ACCOK] < 0.5) need_init = true;
         if (k + 1 < n) {
           if (b[S_HASREF] < 0.5) fiberform::fail_one(lmp, FLERR, "fix fiber/beam: element without reference");

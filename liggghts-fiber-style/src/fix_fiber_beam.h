@@ -83,9 +83,15 @@ class FixFiberBeam : public Fix {
   void frame(int i, double t1[3], double t2[3], double t3[3]) const;
   // outer and inner semi-axes a1, a2, b1, b2 of the node's section, m
   void section_radii(int i, double r[4]) const;
-  // radius of the circle that stands for the section in contacts inside the Newton solve (m): the
-  // larger outer half-axis
+  // the larger outer half-axis (m): the convergence length of the Newton solve, and the radius of a
+  // circular section in contacts inside it
   double contact_radius(int i) const { return node_[i][A1] > node_[i][A2] ? node_[i][A1] : node_[i][A2]; }
+  // true for a collapsed section (a1 != a2): contacts inside the Newton solve see the thesis'
+  // rectangle 2 a1 x 2 a2 (a1 along t1, a2 along t2; physics/static_bodies.h element_extent)
+  bool contact_rect(int i) const { return node_[i][A1] != node_[i][A2]; }
+  // the largest distance of the contact section's surface from the centre line (m): the radius
+  // of a circle, the half-diagonal of a rectangle
+  double contact_reach(int i) const;
   // the first fix fiber/beam defined in this LAMMPS instance, or nullptr
   static FixFiberBeam *find(class LAMMPS *lmp);
   // true if this fix comes before `other` in the fix list (its hooks run first)

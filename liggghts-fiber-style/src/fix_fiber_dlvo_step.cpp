@@ -75,7 +75,7 @@ void FixFiberDlvoStep::gather_partners() {
     if (!beam_->is_node(i)) continue;
     const double rec[G_N] = {static_cast<double>(beam_->fiber_id(i)), static_cast<double>(beam_->node_index(i)),
                              atom->x[i][0], atom->x[i][1], atom->x[i][2], atom->v[i][0], atom->v[i][1],
-                             atom->v[i][2], atom->rmass[i], beam_->contact_radius(i),
+                             atom->v[i][2], atom->rmass[i], beam_->contact_reach(i),
                              std::sqrt(atom->f[i][0] * atom->f[i][0] + atom->f[i][1] * atom->f[i][1] +
                                        atom->f[i][2] * atom->f[i][2]) / atom->rmass[i]};
     mine_.insert(mine_.end(), rec, rec + G_N);

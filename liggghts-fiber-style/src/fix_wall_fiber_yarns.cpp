@@ -328,25 +328,40 @@ void FixWallFiberYarns::scan_contacts() {
   double **x = atom->x;
   double gap_min = std::numeric_limits<double>::max();
   phys::BodyHit hits[phys::StaticBodies::kMaxHits];
+  // the contact section of node k as the Newton solve sees it (fix fiber/beam: circle or rectangle)
+  auto section = [&](int k) {
+    phys::rod::Node nd;
+    nd.x = {x[k][0], x[k][1], x[k][2]};
+    const double *q = beam_->quaternion(k);
+    nd.q = {q[0], q[1], q[2], q[3]};
+    nd.radius = beam_->contact_radius(k);
+    if (beam_->contact_rect(k)) {
+      double rr[4];
+      beam_->section_radii(k, rr);
+      nd.rect[0] = rr[0];
+      nd.rect[1] = rr[1];
+    }
+    return nd;
+  };
   for (int i = 0; i < nlocal; ++i) {
     if (!(atom->mask[i] & groupbit) || !beam_->is_node(i)) continue;
-    double rr[4];
-    beam_->section_radii(i, rr);
-    const double r1 = std::max(rr[0], rr[1]);
-    const phys::Vec3 xi{x[i][0], x[i][1], x[i][2]};
+    const phys::rod::Node a = section(i);
     int nh = 0;
     if (beam_->node_count(i) > 1) {
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
       const int j = atom->map(atom->tag[i] + 1);
       if (j < 0) continue;  // not present here (fix fiber/beam's ghost cut-off covers an element)
-      double rj[4];
-      beam_->section_radii(j, rj);
-      nh = bodies_.element_hits(xi, {x[j][0], x[j][1], x[j][2]}, std::max(r1, std::max(rj[0], rj[1])),
-                                law().h_cut, hits);
+      const phys::rod::Node b = section(j);
+      const double r = phys::element_reach(a, b);
+      nh = bodies_.element_hits(a.x, b.x, r, law().h_cut + r, hits);
+      for (int k = 0; k < nh; ++k) hits[k].h += r - phys::element_extent(a, b, hits[k].n);
     } else {
-      nh = bodies_.node_hits(xi, r1, law().h_cut, hits);
+      const double r = phys::section_reach(a);
+      nh = bodies_.node_hits(a.x, r, law().h_cut + r, hits);
+      for (int k = 0; k < nh; ++k) hits[k].h += r - phys::node_extent(a, hits[k].n);
     }
     for (int b = 0; b < nh; ++b) {
+      if (hits[b].h >= law().h_cut) continue;
       local_[0] += 1.0;
       gap_min = std::min(gap_min, hits[b].h);
     }

@@ -51,6 +51,23 @@ inline Fiber make_fiber(int ne, double L, double r_out, double r_in, Vec3 c, boo
   return f;
 }
 
+// make_fiber's fiber with a collapsed fiber's rectangular contact section 2 a1 x 2 a2
+// (rod::Node::rect, the thesis' rule; the beam section stays make_fiber's hollow circle of radius
+// a1), lying flat: its thickness axis t2 vertical (along x the frame is turned about the axis).
+inline Fiber make_ribbon(int ne, double L, double a1, double a2, Vec3 c, bool along_y = false) {
+  Fiber f = make_fiber(ne, L, a1, 0.6 * a1, c, along_y);
+  for (rod::Node &nd : f.nodes) {
+    if (!along_y) nd.q = beam::qmul(nd.q, beam::qexp({0, 0, 0.5 * beam::kPi}));
+    nd.rect[0] = a1;
+    nd.rect[1] = a2;
+  }
+  for (std::size_t k = 0; k + 1 < f.nodes.size(); ++k) {
+    rod::Element &e = f.els[k];
+    e.ref = beam::element_reference(f.nodes[k].x, f.nodes[k].q, f.nodes[k + 1].x, f.nodes[k + 1].q);
+  }
+  return f;
+}
+
 }  // namespace fiberform::testing
 
 #endif

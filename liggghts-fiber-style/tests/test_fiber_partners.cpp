@@ -45,7 +45,7 @@ struct Sim {
     for (int i = 0; i < static_cast<int>(fibers.size()); ++i) {
       std::vector<FiberPartners::Point> pts;
       for (const rod::Node &nd : fibers[i]->nodes) {
-        pts.push_back({nd.x, nd.v, nd.m, nd.radius});
+        pts.push_back({nd.x, nd.v, nd.m, section_reach(nd)});
         vmax = std::max(vmax, norm(nd.v));
         amax = std::max(amax, norm(nd.F) / nd.m);
       }
@@ -120,14 +120,20 @@ void test_pairs() {
   expect(q.cluster(0) != q.cluster(1), "separate clusters");
 }
 
-void test_stack(double h, double v0, double T = 0.02) {
+// ribbons: collapsed fibers (rectangular contact sections 2 r x 2 r/4) lying flat, which stack at
+// their thickness 2 r/4, not at the 2 r of a circle
+void test_stack(double h, double v0, double T = 0.02, bool ribbons = false) {
   const double R = 60e-6, d = 150e-6, L = 0.6e-3, acc = 2000.0, r = 10e-6;
+  const double t = ribbons ? 0.25 * r : r;  // half-thickness: the centre line's height on a support
   StaticBodies yarns;
   for (double x : {-d, d}) yarns.add_segment({x, -1e-3, 0}, {x, 1e-3, 0}, R, x < 0 ? 0 : 1);
-  yarns.build_bins(r + 50e-9 + 2 * L / 12);
-  Fiber B1 = make_fiber(12, L, r, 0.6 * r, {0, -d, R + r + 1e-9}, false);
-  Fiber B2 = make_fiber(12, L, r, 0.6 * r, {0, d, R + r + 1e-9}, false);
-  Fiber A = make_fiber(12, L, r, 0.6 * r, {5e-6, 0, R + 3 * r + 200e-9}, true);
+  yarns.build_bins(std::hypot(r, t) + 50e-9 + 2 * L / 12);
+  auto fiber = [&](Vec3 c, bool along_y) {
+    return ribbons ? fiberform::testing::make_ribbon(12, L, r, t, c, along_y) : make_fiber(12, L, r, 0.6 * r, c, along_y);
+  };
+  Fiber B1 = fiber({0, -d, R + t + 1e-9}, false);
+  Fiber B2 = fiber({0, d, R + t + 1e-9}, false);
+  Fiber A = fiber({5e-6, 0, R + 3 * t + 200e-9}, true);
   Sim sim;
   sim.law.steric.s1_damping = true;  // as the lay-down's newton contacts
   StaticContactModel on_yarns(yarns, sim.law, 0.0);
@@ -177,8 +183,9 @@ void test_stack(double h, double v0, double T = 0.02) {
   for (const rod::Node &nd : all) vmax = std::max(vmax, norm(nd.v));
   // as for the yarns (test_static_bodies): up to 10 us the transient overlap stays below 5 % of the
   // radius; at 1e-4 s the centre lines stay apart
-  const double bound = h <= 1e-5 ? 0.05 * r : r;
-  std::snprintf(what, sizeof what, "stack, dt %g s: no pass-through (smallest gap > -%g m)", h, bound);
+  const double bound = h <= 1e-5 ? 0.05 * t : t;
+  std::snprintf(what, sizeof what, "stack, dt %g s%s: no pass-through (smallest gap > -%g m)", h,
+                ribbons ? ", ribbons" : "", bound);
   expect(gap_min > -bound, what, gap_min, -bound);
   std::snprintf(what, sizeof what, "stack, dt %g s: at rest after 20 ms (m/s)", h);
   expect(vmax < 1e-4, what, vmax, 1e-4);
@@ -198,8 +205,23 @@ void test_stack(double h, double v0, double T = 0.02) {
     std::snprintf(what, sizeof what, "stack, dt %g s: yarn reactions on a lower fiber = its load + its lever-rule share of the top's", h);
     expect(std::fabs(fy.z / want - 1.0) < 1e-3, what, fy.z / want, 1.0);
   }
-  std::printf("stack dt %g s v0 %g m/s: smallest gap %.3g nm, top contact force / load %.6f, largest cluster %d\n", h, v0,
-              1e9 * gap_min, fa.z / (acc * A.mass), sim.max_cluster);
+  // the heights of the centre lines: each fiber rests on its support at its half-thickness t (plus
+  // the law's equilibrium gap, nanometres)
+  for (Fiber *B : {&B1, &B2}) {
+    const double zb = B->nodes[3].x.z - R;  // over the yarn at x = -d
+    std::snprintf(what, sizeof what, "stack, dt %g s%s: a lower fiber's centre line at its half-thickness above the yarns", h,
+                  ribbons ? ", ribbons" : "");
+    expect(std::fabs(zb - t) < 0.05 * t, what, zb, t);
+  }
+  // A's nodes 3 and 9 lie over the lower fibers (y = -d, d), which A crosses near their node 6
+  const double dz = A.nodes[3].x.z - B1.nodes[6].x.z, dz2 = A.nodes[9].x.z - B2.nodes[6].x.z;
+  std::snprintf(what, sizeof what, "stack, dt %g s%s: the top fiber's centre line one thickness above the lower ones'", h,
+                ribbons ? ", ribbons" : "");
+  expect(std::fabs(dz - 2 * t) < 0.1 * t && std::fabs(dz2 - 2 * t) < 0.1 * t, what, dz, 2 * t);
+  std::printf("stack dt %g s v0 %g m/s%s: smallest gap %.3g nm, top contact force / load %.6f, largest cluster %d, "
+              "lower centre lines %.4g / %.4g um above the yarns, top centre line %.4g / %.4g um above theirs\n", h, v0,
+              ribbons ? " ribbons" : "", 1e9 * gap_min, fa.z / (acc * A.mass), sim.max_cluster,
+              1e6 * (B1.nodes[3].x.z - R), 1e6 * (B2.nodes[3].x.z - R), 1e6 * dz, 1e6 * dz2);
 }
 
 void test_free_collision(double h) {
@@ -248,5 +270,6 @@ int main() {
   for (double h : {1e-7, 1e-6, 1e-5}) test_free_collision(h);
   for (double h : {1e-6, 1e-5}) test_stack(h, 0.05);
   test_stack(1e-4, 0.0);
+  for (double h : {1e-6, 1e-5}) test_stack(h, 0.05, 0.02, true);
   return fiberform::check::finish("test_fiber_partners");
 }

@@ -5,7 +5,8 @@
    comes to rest without passing through them (transient overlap < 5 % of the fiber radius up to
    1e-5 s, centre line outside the yarn at 1e-4 s) and the two contact forces equal the support
    reactions of a beam on two supports (statics); Coulomb friction on a plane holds below mu N and
-   slides at (F_t - mu N)/M above it. */
+   slides at (F_t - mu N)/M above it. The rectangular contact section of a collapsed fiber against
+   the closed forms of a rectangle (extent along a direction; gaps to a yarn and a plane). */
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -43,6 +44,59 @@ void test_geometry() {
   expect(b.add_plane({0, 0, -1e-4}, {0, 0, 2}), "plane accepted");
   expect(!b.add_plane({0, 0, 0}, {0, 0, 0}), "zero normal refused");
   expect(std::fabs(b.plane_gap(0, {5, 5, 2e-4}, r) - (3e-4 - r)) < 1e-15, "plane gap");
+}
+
+// The rectangular contact section of a collapsed fiber (2 a1 x 2 a2): its extent from the centre
+// line along a direction, against the closed forms of a rectangle.
+void test_rect_sections() {
+  using fiberform::testing::Fiber;
+  using fiberform::testing::make_fiber;
+  const double a1 = 12e-6, a2 = 3e-6, s2 = std::sqrt(0.5);
+  const Vec3 ax{1, 0, 0}, up{0, 0, 1};
+  // thickness axis t2 = z (flat): a2 up, a1 sideways, the corner direction at most the half-diagonal
+  expect(std::fabs(rect_extent(ax, up, a1, a2, {0, 0, 1}) - a2) < 1e-18, "rect: face along t2", rect_extent(ax, up, a1, a2, {0, 0, 1}), a2);
+  expect(std::fabs(rect_extent(ax, up, a1, a2, {0, -1, 0}) - a1) < 1e-18, "rect: face along t1", rect_extent(ax, up, a1, a2, {0, -1, 0}), a1);
+  // at 45 degrees the line leaves through the thin face: a2 / sin 45
+  expect(std::fabs(rect_extent(ax, up, a1, a2, {0, s2, s2}) - a2 / s2) < 1e-17, "rect: 45 degrees", rect_extent(ax, up, a1, a2, {0, s2, s2}), a2 / s2);
+  // through the corner exactly: hypot(a1, a2)
+  const double hd = std::hypot(a1, a2);
+  expect(std::fabs(rect_extent(ax, up, a1, a2, {0, a1 / hd, a2 / hd}) - hd) < 1e-17, "rect: corner", rect_extent(ax, up, a1, a2, {0, a1 / hd, a2 / hd}), hd);
+  // an axial part of n is dropped; t2 not normal to the axis is made so
+  expect(std::fabs(rect_extent(ax, {0.3, 0, 2}, a1, a2, {s2, 0, s2}) - a2) < 1e-18, "rect: axial parts dropped", rect_extent(ax, {0.3, 0, 2}, a1, a2, {s2, 0, s2}), a2);
+  expect(std::fabs(rect_extent(ax, up, a1, a2, {1, 0, 0}) - a2) < 1e-18, "rect: along the axis: the smaller half-side");
+  // nodes: a fiber along x with t1 vertical lies on its edge (make_fiber's frame), turned about its
+  // axis (make_ribbon) it lies flat; circles keep their radius
+  Fiber edge = make_fiber(2, 40e-6, a1, 0.6 * a1, {0, 0, 0});
+  for (rod::Node &nd : edge.nodes) {
+    nd.rect[0] = a1;
+    nd.rect[1] = a2;
+  }
+  Fiber flat = fiberform::testing::make_ribbon(2, 40e-6, a1, a2, {0, 0, 0});
+  Fiber circ = make_fiber(2, 40e-6, a1, 0.6 * a1, {0, 0, 0});
+  const Vec3 z{0, 0, 1};
+  expect(std::fabs(element_extent(edge.nodes[0], edge.nodes[1], z) - a1) < 1e-17, "ribbon on its edge: a1 up", element_extent(edge.nodes[0], edge.nodes[1], z), a1);
+  expect(std::fabs(element_extent(flat.nodes[0], flat.nodes[1], z) - a2) < 1e-17, "flat ribbon: a2 up", element_extent(flat.nodes[0], flat.nodes[1], z), a2);
+  expect(std::fabs(node_extent(flat.nodes[1], z) - a2) < 1e-17, "flat ribbon node: a2 up", node_extent(flat.nodes[1], z), a2);
+  expect(element_extent(circ.nodes[0], circ.nodes[1], z) == a1 && section_reach(circ.nodes[0]) == a1 &&
+             law_radius(circ.nodes[0]) == a1, "circle: the radius");
+  expect(std::fabs(section_reach(flat.nodes[0]) - hd) < 1e-18 && law_radius(flat.nodes[0]) == a2,
+         "ribbon: reach = half-diagonal, law radius = half-thickness");
+  // on a yarn across it and on a plane: the gap from the face, not from the circle of a1
+  StaticBodies b;
+  const double R = 50e-6;
+  b.add_segment({0, -1e-3, -R - a2 - 5e-9}, {0, 1e-3, -R - a2 - 5e-9}, R, 0);
+  b.build_bins(hd + 1e-6 + 40e-6);
+  expect(b.add_plane({0, 0, -a2 - 7e-9}, {0, 0, 1}), "plane accepted");
+  const ContactLaw law;
+  StaticContactModel model(b, law, 0.0);
+  std::vector<Vec3> F(flat.nodes.size());
+  model.evaluate(flat.nodes, F, nullptr);
+  expect(std::fabs(model.min_gap() - 5e-9) < 1e-15, "flat ribbon on a yarn: gap from its face", model.min_gap(), 5e-9);
+  StaticBodies pl;
+  expect(pl.add_plane({0, 0, -a2 - 7e-9}, {0, 0, 1}), "plane accepted");
+  StaticContactModel on_plane(pl, law, 0.0);
+  on_plane.evaluate(flat.nodes, F, nullptr);
+  expect(std::fabs(on_plane.min_gap() - 7e-9) < 1e-15, "flat ribbon on a plane: gap from its face", on_plane.min_gap(), 7e-9);
 }
 
 using fiberform::testing::Fiber;
@@ -165,6 +219,7 @@ void test_friction(double at_over_an, double stick = StaticContactModel::kStick)
 
 int main() {
   test_geometry();
+  test_rect_sections();
   // lay-down fibers (r 5-12 um) from 1 us to 100 us; a 100 um thick fiber at 1 us
   for (double h : {1e-6, 5e-6, 1e-5, 1e-4})
     for (double r : {5e-6, 12e-6}) test_drop_on_yarns(h, r);

@@ -367,13 +367,15 @@ def warp_crimp(yarns: list[Yarn]) -> float:
 # Checks
 
 
-def segment_distances(
+def segment_closest_differences(
     p1: FloatArray, q1: FloatArray, p2: FloatArray, q2: FloatArray
 ) -> FloatArray:
-    """Distance between segments [p1,q1] and [p2,q2] (arrays (..., 3), broadcast; e.g. rows of
-    two (n, 3) arrays pairwise, or all pairs with p1[:, None] and p2[None, :]): the closest points
-    with both parameters clamped to [0, 1]. The one implementation used by the fabric checks, fiber
-    placement (stage generate) and the lay-down's clearances."""
+    """c1 - c2 (..., 3), m: the closest point c1 of segment [p1,q1] minus the closest point c2 of
+    segment [p2,q2] (arrays (..., 3), broadcast; e.g. rows of two (n, 3) arrays pairwise, or all
+    pairs with p1[:, None] and p2[None, :]), both parameters clamped to [0, 1] (C++ twin:
+    contact_geometry.h closest_params_segment_segment). The one implementation of the closest
+    points, used by :func:`segment_distances` and the sheet's fiber-fiber gaps
+    (fiber_sheet.fiber_fiber_gap: the contact normal)."""
     d1 = q1 - p1
     d2 = q2 - p2
     r = p1 - p2
@@ -393,7 +395,17 @@ def segment_distances(
         t = np.clip(t, 0, 1)
     c1 = p1 + d1 * s[..., None]
     c2 = p2 + d2 * t[..., None]
-    return np.asarray(np.linalg.norm(c1 - c2, axis=-1))
+    return np.asarray(c1 - c2)
+
+
+def segment_distances(
+    p1: FloatArray, q1: FloatArray, p2: FloatArray, q2: FloatArray
+) -> FloatArray:
+    """Distance between segments [p1,q1] and [p2,q2] (arrays (..., 3), broadcast; e.g. rows of
+    two (n, 3) arrays pairwise, or all pairs with p1[:, None] and p2[None, :]), m: the norm of
+    :func:`segment_closest_differences` (both parameters clamped to [0, 1]). Used by the fabric
+    checks, fiber placement (stage generate) and the lay-down's clearances."""
+    return np.asarray(np.linalg.norm(segment_closest_differences(p1, q1, p2, q2), axis=-1))
 
 
 @dataclass(frozen=True)

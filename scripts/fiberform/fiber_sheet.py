@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .fabric_geometry import segment_distances
-from .inputs import STAR, LiggghtsInput, file_token, ident_list
+from .fabric_geometry import segment_closest_differences, segment_distances
+from .fiber_io import quat_rotate
+from .inputs import STAR, LiggghtsInput, Token, dump_format, file_token, fix_ref, ident_list
 from .products import (
     FIBERS_H5, Chain, Yarns, read_fiber_outer_axes, read_sheet_chains, read_yarns, sheet_chains,
 )
@@ -191,11 +192,65 @@ def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Ar
     return out
 
 
-def fiber_fiber_gap(x: Array, offsets: Array, radius: Array) -> float:
-    """Smallest surface gap between elements of DIFFERENT fibers, m: centre-line distance minus
-    the radii of both elements (an element's radius: the larger of its nodes' ``radius``, one per
-    row of x). The contact law keeps it above about -10 nm; below -(radius) a centre line is
-    inside another fiber (a pass-through). inf with fewer than two fibers."""
+def rect_extent(axis: Array, t2: Array, a1: Array, a2: Array, n: Array) -> Array:
+    """Extent (m) of rectangular sections 2 ``a1`` x 2 ``a2`` from their centre line along the
+    directions ``n``: where the line from the centre along n's part normal to the ``axis`` leaves
+    the rectangle (thesis sec. 2.4.3: contact points moved along the line between the centre lines
+    to the surfaces). Vectors (..., 3) and half-sides (...,) broadcast; ``axis`` unit; ``n`` unit
+    (or zero); ``t2`` the direction of a2, not necessarily unit or normal to the axis: made normal
+    to it and unit (a zero t2: z; a normal part of norm < 1e-8: x instead), a1 along
+    t2 x axis. n's axial part is dropped; n along the axis (or zero) gives min(a1, a2). Between
+    min(a1, a2) (a face) and hypot(a1, a2) (a corner). The C++ twin: contact_geometry.h
+    ``rect_extent`` (with ``rect_thickness_dir``, ``rect_surface_distance``)."""
+    axis, t2, n = (np.asarray(v, dtype=np.float64) for v in (axis, t2, n))
+    a1, a2 = np.asarray(a1, dtype=np.float64), np.asarray(a2, dtype=np.float64)
+
+    def normal_part(v: Array) -> Array:  # v minus its part along the axis
+        return v - np.sum(v * axis, axis=-1, keepdims=True) * axis
+
+    u = normal_part(n)
+    lu = np.linalg.norm(u, axis=-1, keepdims=True)
+    t2 = np.where(np.linalg.norm(t2, axis=-1, keepdims=True) > 0.0, t2, np.array([0.0, 0.0, 1.0]))
+    e_t = normal_part(t2)  # contact_geometry.h rect_thickness_dir
+    e_t = np.where(np.linalg.norm(e_t, axis=-1, keepdims=True) < 1e-8, normal_part(np.array([1.0, 0.0, 0.0])), e_t)
+    e_t = e_t / np.linalg.norm(e_t, axis=-1, keepdims=True)
+    e_w = np.cross(e_t, axis)
+    u = u / np.where(lu > 1e-9, lu, 1.0)
+    face = lu[..., 0] > 1e-9
+    cw, ct = np.abs(np.sum(u * e_w, axis=-1)), np.abs(np.sum(u * e_t, axis=-1))
+    with np.errstate(divide="ignore"):
+        dw = np.where(cw > 0.0, a1 / np.where(cw > 0.0, cw, 1.0), math.inf)
+        dt = np.where(ct > 0.0, a2 / np.where(ct > 0.0, ct, 1.0), math.inf)
+    return np.asarray(np.where(face, np.minimum(dw, dt), np.minimum(a1, a2)))
+
+
+def node_extents(axes: Array, q: Array, n: Array) -> Array:
+    """Extent (m) of each node's contact section from its centre along the unit direction ``n``,
+    in the node's own frame (axis t3 = R(q) e3, t2 = R(q) e2): a1 for a circle (``axes`` (n, 2)
+    = a1, a2 with a1 == a2), the rectangle's :func:`rect_extent` for a collapsed fiber. The C++
+    twin: static_bodies.h ``node_extent`` (planes: side walls, the press plate)."""
+    axes = np.asarray(axes, dtype=np.float64)
+    rect = axes[:, 0] != axes[:, 1]
+    ext = rect_extent(quat_rotate(q, np.array([0.0, 0.0, 1.0])), quat_rotate(q, np.array([0.0, 1.0, 0.0])),
+                      axes[:, 0], axes[:, 1], np.broadcast_to(np.asarray(n, dtype=np.float64), (len(axes), 3)))
+    return np.asarray(np.where(rect, ext, axes[:, 0]))
+
+
+def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None = None,
+                    q: Array | None = None) -> float:
+    """Smallest surface gap between elements of DIFFERENT fibers, m: |d| - e_A(n) - e_B(n), d the
+    closest point of element A's centre line minus that of B's (parameters clamped to [0, 1]),
+    n = d / |d|, e the element's section extent along n. Sections as the fibers' contacts inside
+    the implicit step (physics/static_bodies.h ``element_extent``): without ``axes`` or for nodes
+    with a1 == a2 a circle, the element's extent the larger of its nodes' ``radius`` (m, one per
+    row of x); ``axes`` (n, 2): the nodes' outer half-axes (a1, a2), m (fibers.h5 radii); a node
+    with a1 != a2 is a collapsed fiber's rectangle 2 a1 x 2 a2, a1 along the node frame's t1 and
+    a2 along t2 = R(q) e2 (``q`` (n, 4): the nodes' unit quaternions w, x, y, z, from the dump,
+    :func:`frame_quaternions`; required then). An element with a rectangular node is a rectangle
+    about its chord with the larger a1 and a2 of its rectangular nodes and t2 the sum of its nodes'
+    (:func:`rect_extent`); touching centre lines (|d| = 0) take min(a1, a2). The contact law keeps
+    the gap above about -10 nm; below minus the radius (thickness) a centre line is inside another
+    fiber (a pass-through). inf with fewer than two fibers."""
     owner = np.concatenate([np.full(max(0, hi - lo - 1), k) for k, (lo, hi) in
                             enumerate(zip(offsets[:-1], offsets[1:]))] or [np.zeros(0)]).astype(np.int64)
     idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])
@@ -203,20 +258,88 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array) -> float:
     if len(idx) < 2 or len(np.unique(owner)) < 2:
         return math.inf
     r_el = np.maximum(radius[idx], radius[idx + 1])
+    rect = (np.zeros((len(x), 2)) if axes is None
+            else np.where((axes[:, 0] != axes[:, 1])[:, None], axes, 0.0))  # fix fiber/beam contact_rect
+    is_rect = (rect[idx, 0] > 0.0) | (rect[idx + 1, 0] > 0.0)
     out = math.inf
+    if not np.any(is_rect):  # circles
+        for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
+            d = _all_pairs(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+            d = d - r_el[chunk][:, None] - r_el[None, :]
+            d[owner[chunk][:, None] == owner[None, :]] = math.inf
+            out = min(out, float(d.min()))
+        return out
+    if q is None:
+        raise ValueError("fiber_fiber_gap: rectangular sections need the node quaternions q")
+    a1, a2 = np.maximum(rect[idx, 0], rect[idx + 1, 0]), np.maximum(rect[idx, 1], rect[idx + 1, 1])
+    chord = x[idx + 1] - x[idx]
+    length = np.linalg.norm(chord, axis=1)
+    e2 = np.array([0.0, 1.0, 0.0])
+    t2 = quat_rotate(q[idx], e2) + quat_rotate(q[idx + 1], e2)
+    axis = chord / np.where(length > 0.0, length, 1.0)[:, None]
+    # a zero-length element: the frame of its (first) rectangular node (static_bodies.h node_extent)
+    node = np.where(rect[idx, 0] > 0.0, idx, idx + 1)
+    axis = np.where((length > 0.0)[:, None], axis, quat_rotate(q[node], np.array([0.0, 0.0, 1.0])))
+    t2 = np.where((length > 0.0)[:, None], t2, quat_rotate(q[node], e2))
+    # bounds of the extents: a face's min(a1, a2) to a corner's hypot(a1, a2) (circles: r)
+    lo_e = np.where(is_rect, np.minimum(a1, a2), r_el)
+    hi_e = np.where(is_rect, np.hypot(a1, a2), r_el)
+
+    def extent(k: npt.NDArray[np.int64], n: Array) -> Array:
+        return np.where(is_rect[k], rect_extent(axis[k], t2[k], a1[k], a2[k], n), r_el[k])
+
     for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
-        d = _all_pairs(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
-        d = d - r_el[chunk][:, None] - r_el[None, :]
-        d[owner[chunk][:, None] == owner[None, :]] = math.inf
-        out = min(out, float(d.min()))
+        d = segment_closest_differences(x[idx[chunk]][:, None, :], x[idx[chunk] + 1][:, None, :],
+                                        x[idx][None, :, :], x[idx + 1][None, :, :])
+        dist = np.linalg.norm(d, axis=-1)
+        same = owner[chunk][:, None] == owner[None, :]
+        upper = dist - lo_e[chunk][:, None] - lo_e[None, :]  # >= the gap
+        upper[same] = math.inf
+        lower = dist - hi_e[chunk][:, None] - hi_e[None, :]  # <= the gap
+        # only pairs that may beat the smallest gap so far or this chunk's smallest upper bound
+        i, j = np.nonzero((lower <= min(out, float(upper.min()))) & ~same)
+        if len(i) == 0:
+            continue
+        dd = dist[i, j]
+        n = d[i, j] / np.where(dd > 0.0, dd, 1.0)[:, None]
+        out = min(out, float(np.min(dd - extent(chunk[i], n) - extent(j, n))))
     return out
+
+
+#: the dump columns of fix fiber/beam's node quaternions (per-atom f_beam[4..7]: qw qx qy qz)
+QUAT_COLUMNS = ("f_beam[4]", "f_beam[5]", "f_beam[6]", "f_beam[7]")
+
+
+def node_dump_columns(f: Any) -> tuple[list[object], Token]:
+    """The columns of the stages' node dump (``dump ... custom``) and its ``dump_modify format``:
+    id, mass, position (m), velocity (m/s), fiber ID and node index (f_beam[1], f_beam[2]) and, for
+    collapsed fibers (``fibers.cross_section`` rectangular), the node quaternions
+    :data:`QUAT_COLUMNS` (the sections' orientation, for :func:`fiber_fiber_gap`)."""
+    cols: list[object] = ["id", "mass", "x", "y", "z", "vx", "vy", "vz", fix_ref("beam", 1), fix_ref("beam", 2)]
+    if f.cross_section != "circular":
+        cols += [fix_ref("beam", k) for k in range(4, 8)]
+    return cols, dump_format(["int"] + ["float"] * (len(cols) - 1))
+
+
+def _frame_order(columns: Mapping[str, Any]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """(fiber IDs 0-based, the order by fiber then node) of a dump frame's rows."""
+    fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64) - 1
+    return fid, np.lexsort((np.rint(np.asarray(columns["f_beam[2]"])), fid))
+
+
+def frame_quaternions(columns: Mapping[str, Any]) -> Array | None:
+    """The node quaternions (n, 4: w, x, y, z) of a dump frame in the order of
+    :func:`frame_fibers`; None if the dump has no :data:`QUAT_COLUMNS` (circular fibers)."""
+    if not all(c in columns for c in QUAT_COLUMNS):
+        return None
+    _, order = _frame_order(columns)
+    return np.stack([np.asarray(columns[c], dtype=np.float64)[order] for c in QUAT_COLUMNS], axis=1)
 
 
 def frame_fibers(columns: Mapping[str, Any]) -> tuple[Array, Array, Array]:
     """Node positions of a dump frame ordered by fiber then node, with the fiber IDs (0-based)
     and the offsets of each fiber's nodes."""
-    fid = np.rint(np.asarray(columns["f_beam[1]"])).astype(np.int64) - 1
-    order = np.lexsort((np.rint(np.asarray(columns["f_beam[2]"])), fid))
+    fid, order = _frame_order(columns)
     x = np.stack([np.asarray(columns[c])[order] for c in ("x", "y", "z")], axis=1)
     fids = fid[order]
     present, counts = np.unique(fids, return_counts=True)

@@ -79,6 +79,21 @@ inline Vec3 rect_thickness_dir(Vec3 axis_unit, Vec3 up) {
   return (1.0 / n) * t;
 }
 
+// Extent of a rectangular section 2 a1 x 2 a2 (a1 along t1, a2 along t2; t1, t2, axis a right-handed
+// frame) from the centre line along the unit direction n (m): where the line from the centre along
+// n's part normal to the axis leaves the rectangle (the thesis' rule above, used by the contacts
+// inside the implicit step, docs/models/contact.md section 9). t2 need not be unit or normal to the
+// axis (it is made so, by rect_thickness_dir). n's axial part
+// is dropped (contacts at an element's end); n along the axis gives min(a1, a2). Between min(a1, a2)
+// (a face) and hypot(a1, a2) (a corner).
+inline double rect_extent(Vec3 axis_unit, Vec3 t2, double a1, double a2, Vec3 n) {
+  Vec3 u = n - dot(n, axis_unit) * axis_unit;
+  const double lu = norm(u);
+  if (!(lu > 1e-9)) return a1 < a2 ? a1 : a2;
+  const Vec3 e_t = rect_thickness_dir(axis_unit, norm(t2) > 0.0 ? t2 : Vec3{0, 0, 1});
+  return rect_surface_distance(axis_unit, e_t, 2.0 * a1, 2.0 * a2, (1.0 / lu) * u);
+}
+
 // ---- force transfer to the nodes (thesis 2.4.2). A force F acting at the centre-line point of
 // fraction s plus an offset r_off (surface point - centre-line point) becomes node forces
 // (1-s)F, sF (force and moment about any point preserved for the centre-line part) and the

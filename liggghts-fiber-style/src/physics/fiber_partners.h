@@ -5,7 +5,9 @@
    "cluster"; physics/implicit_rod.h solves several fibers at once when Node::next separates them).
    The contact of two elements of different fibers of a cluster is the fiber/dlvo law
    (physics/contact_law.h) at the END-of-step state of both, at the closest points of their centre
-   lines (parameters s, t): gap h = |d| - r_A - r_B, d = x_A(s) - x_B(t), n = d / |d|, rate
+   lines (parameters s, t): gap h = |d| - r_A - r_B, d = x_A(s) - x_B(t), n = d / |d| (r: the
+   section's extent along n, physics/static_bodies.h element_extent: a circle's radius or a
+   collapsed fiber's rectangle, the thesis' rule of moving the points to the surfaces), rate
    u = n . (v_A(s) - v_B(t)), reduced mass of the two contact points (lever rule:
    1/m_point = (1-s)^2/m_a + s^2/m_b). The force f(h, u) n acts on A's nodes with weights (1-s, s) and
    -f n on B's with (1-t, t): action equals reaction exactly, at every Newton iterate. Its tangent is
@@ -20,9 +22,9 @@
    fiber/dlvo/step gathers it), finds the candidate element pairs (surfaces closer than a margin that
    covers the motion over the step), and joins fibers connected by candidate pairs into clusters
    (union-find; a cluster is named by its smallest fiber id). Pairs are detected with periodic
-   images: each carries the shift added to B's unwrapped coordinates. Sections: circles of the
-   nodes' radius (fix fiber/beam: the larger half-axis). Self-contact of a fiber and single-node
-   fibers are not modelled here.
+   images: each carries the shift added to B's unwrapped coordinates. Candidates use the nodes'
+   `radius` (fix fiber/beam contact_reach: a circle's radius, a rectangle's half-diagonal).
+   Self-contact of a fiber and single-node fibers are not modelled here.
 
    Pure classes, SI units, no LIGGGHTS dependency; tests/test_fiber_partners.cpp. */
 #ifndef FIBERFORM_PHYSICS_FIBER_PARTNERS_H
@@ -50,7 +52,7 @@ class FiberPartners {
   struct Point {
     Vec3 x, v;          // position (m), velocity (m/s) at the start of the step
     double m = 0;       // node mass (kg)
-    double radius = 0;  // section radius (m)
+    double radius = 0;  // the section's reach (m): a circle's radius, a rectangle's half-diagonal
   };
   struct Fiber {
     int id;
@@ -226,9 +228,8 @@ class ClusterContactModel : public rod::NodeForceModel {
       const Vec3 d = lerp(A0.x, A1.x, s) - (lerp(B0.x, B1.x, t) + lp.shift);
       const double dist = norm(d);
       if (!(dist > 0.0)) continue;
-      const double rA = std::max(A0.radius, A1.radius), rB = std::max(B0.radius, B1.radius);
-      const double h = dist - rA - rB;
       const Vec3 n = (1.0 / dist) * d;
+      const double h = dist - element_extent(A0, A1, n) - element_extent(B0, B1, n);
       const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
       near_.push_back({{idx[0], idx[1], idx[2], idx[3]}, {w[0], w[1], w[2], w[3]}, n, h});
       min_gap_ = std::min(min_gap_, h);
@@ -238,6 +239,7 @@ class ClusterContactModel : public rod::NodeForceModel {
       const double inv_mA = w[0] * w[0] / A0.m + w[1] * w[1] / A1.m;
       const double inv_mB = w[2] * w[2] / B0.m + w[3] * w[3] / B1.m;
       PairLaw pl;
+      const double rA = element_law_radius(A0, A1), rB = element_law_radius(B0, B1);
       pl.setup(law_, rA, rB, inv_mA, inv_mB, law_.effective_potential(rA), law_.effective_potential(rB));
       const double f = pl.force(h, u);
       for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] + (w[i] * f) * n;

@@ -117,6 +117,9 @@ struct Node {
   double scale = 1e-5;               // length scale of the convergence test (m): the section radius
   bool fixed = false;                // clamped: position and frame held
   double radius = 0;                 // section radius seen by the force models (m)
+  // a rectangular contact section 2 rect[0] x 2 rect[1] (half-sides along t1, t2, m) instead of the
+  // circle of `radius` (then the larger half-side); 0, 0: the circle (physics/static_bodies.h)
+  double rect[2] = {0, 0};
   bool next = true;  // an element joins this node to the next one in the vector; false at the last
                      // node of a fiber when several fibers are solved together (a contact cluster)
   // outputs (end of step)

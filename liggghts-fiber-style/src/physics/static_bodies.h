@@ -11,7 +11,9 @@
    points of the two centre lines, per yarn the segment with the smallest gap h = |d| - r - R
    (d from the yarn axis to the element point, n = d/|d| the normal towards the fiber); a node
    (single-node fiber) likewise with the closest point of each yarn's centre line; a node against a
-   plane (point p, unit normal n towards the fibers) at h = n.(x - p) - r.
+   plane (point p, unit normal n towards the fibers) at h = n.(x - p) - r. A collapsed fiber's
+   section is the thesis' rectangle (rod::Node::rect): r is then its extent along n (rect_extent,
+   the helpers below), found among the hits of its largest extent.
 
    The implicit model: at the fiber's end-of-step state x_{n+1}, v_{n+1} (every Newton iterate) the
    contact point of parameter s (lever weights w_a = 1 - s, w_b = s) carries the normal force of the
@@ -53,6 +55,41 @@ struct BodyHit {
   int seg = -1;     // segment of the body (element_segment_hits)
   double t = 0.0;   // parameter of the contact point on that segment
 };
+
+// ---- contact sections of the implicit step's nodes (rod::Node::radius, rod::Node::rect): a circle,
+// or a collapsed fiber's rectangle 2 a1 x 2 a2 (thesis sec. 2.4.3: contact points moved along the
+// line between the centres to the surface; contact_geometry.h rect_extent). Shared by the body
+// contacts here and the fiber-fiber contacts (physics/fiber_partners.h).
+inline bool rect_section(const rod::Node &a) { return a.rect[0] > 0.0 && a.rect[1] > 0.0; }
+// largest distance of a node's section surface from its centre line (m): the candidate searches'
+inline double section_reach(const rod::Node &a) {
+  return rect_section(a) ? std::hypot(a.rect[0], a.rect[1]) : a.radius;
+}
+inline double element_reach(const rod::Node &a, const rod::Node &b) {
+  return std::max(section_reach(a), section_reach(b));
+}
+// the radius of the contact law's terms (m): the circle's, or a rectangle's smaller half-side (as
+// pair fiber/dlvo `section rect` outside the Newton solve)
+inline double law_radius(const rod::Node &a) { return rect_section(a) ? std::min(a.rect[0], a.rect[1]) : a.radius; }
+inline double element_law_radius(const rod::Node &a, const rod::Node &b) {
+  return std::max(law_radius(a), law_radius(b));
+}
+// extent of a node's section from its centre along the unit direction n (m), in the node's frame
+// (t2 = R(q) e2, axis t3 = R(q) e3): single-node fibers and planes
+inline double node_extent(const rod::Node &a, Vec3 n) {
+  if (!rect_section(a)) return a.radius;
+  return rect_extent(beam::qrot(a.q, Vec3{0, 0, 1}), beam::qrot(a.q, Vec3{0, 1, 0}), a.rect[0], a.rect[1], n);
+}
+// extent of element a-b's section along n (m): circles the larger radius; a rectangle about the
+// chord with the larger half-sides of the two nodes and t2 their mean
+inline double element_extent(const rod::Node &a, const rod::Node &b, Vec3 n) {
+  if (!rect_section(a) && !rect_section(b)) return std::max(a.radius, b.radius);
+  const Vec3 d = b.x - a.x;
+  const double len = norm(d);
+  if (!(len > 0.0)) return node_extent(rect_section(a) ? a : b, n);
+  const Vec3 t2 = beam::qrot(a.q, Vec3{0, 1, 0}) + beam::qrot(b.q, Vec3{0, 1, 0});
+  return rect_extent((1.0 / len) * d, t2, std::max(a.rect[0], b.rect[0]), std::max(a.rect[1], b.rect[1]), n);
+}
 
 class StaticBodies {
  public:
@@ -305,15 +342,15 @@ class BodyContactModel : public rod::NodeForceModel {
   void act(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J, int a, int b,
            const BodyHit &hit) {
     const double wa = b < 0 ? 1.0 : 1.0 - hit.s, wb = b < 0 ? 0.0 : hit.s;
+    const rod::Node &A = nodes[static_cast<std::size_t>(a)];
+    const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
     near_.push_back({a, b, wa, wb, hit.n, hit.h});
     min_gap_ = std::min(min_gap_, hit.h);
     if (hit.h >= law_.h_cut) return;
     ++contacts_;
-    const rod::Node &A = nodes[static_cast<std::size_t>(a)];
-    const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
     const Vec3 v = (B ? wa * A.v + wb * B->v : A.v) - hit.vb;  // relative to the body
     const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
-    const double r1 = B ? std::max(A.radius, B->radius) : A.radius;
+    const double r1 = B ? element_law_radius(A, *B) : law_radius(A);
     PairLaw pl;
     pl.setup(law_, r1, hit.r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(hit.r2));
     const double u = dot(hit.n, v);
@@ -390,23 +427,33 @@ class StaticContactModel : public BodyContactModel {
     const double margin = law_.h_cut;
     for (std::size_t k = 0; k < n; ++k) {
       const rod::Node &a = nodes[k];
+      const bool rect_a = rect_section(a);
       for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
-        const double h = bodies_.plane_gap(p, a.x, a.radius);
+        const Vec3 pn = bodies_.planes()[p].n;
+        const double h = bodies_.plane_gap(p, a.x, node_extent(a, pn));
         if (h < a.radius + margin)
-          act(nodes, F, J, static_cast<int>(k), -1,
-              BodyHit{0.0, bodies_.planes()[p].n, h, INFINITY, bodies_.planes()[p].v, -1, 0.0});
+          act(nodes, F, J, static_cast<int>(k), -1, BodyHit{0.0, pn, h, INFINITY, bodies_.planes()[p].v, -1, 0.0});
       }
       if (bodies_.segments().empty()) continue;
       // nodes of several fibers may be solved together (a contact cluster): Node::next
       const bool has_next = k + 1 < n && a.next, has_prev = k > 0 && nodes[k - 1].next;
+      // rectangles: the hits of the section's reach, the gaps then along each hit's normal
       if (!has_next && !has_prev) {  // a single-node fiber
-        const int nh = bodies_.node_hits(a.x, a.radius, a.radius + margin, hits);
-        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), -1, hits[q]);
+        const double r = section_reach(a);
+        const int nh = bodies_.node_hits(a.x, r, r + margin, hits);
+        for (int q = 0; q < nh; ++q) {
+          if (rect_a) hits[q].h += r - node_extent(a, hits[q].n);
+          act(nodes, F, J, static_cast<int>(k), -1, hits[q]);
+        }
       } else if (has_next) {
         const rod::Node &b = nodes[k + 1];
-        const double r = std::max(a.radius, b.radius);
+        const bool rect = rect_a || rect_section(b);
+        const double r = element_reach(a, b);
         const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits);
-        for (int q = 0; q < nh; ++q) act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q]);
+        for (int q = 0; q < nh; ++q) {
+          if (rect) hits[q].h += r - element_extent(a, b, hits[q].n);
+          act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q]);
+        }
       }
     }
   }

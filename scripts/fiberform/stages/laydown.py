@@ -42,15 +42,16 @@ import numpy.typing as npt
 
 from ..coupling_map import MAP_NAME, ExchangeGrid, exchange_map, write_exchange_map
 from ..errors import StageError
-from ..fiber_io import NODES_NAME, fiber_preamble, fibers_in_nodes, laydown_beam_options, write_nodes_subset
+from ..fiber_io import (
+    NODES_NAME, fiber_preamble, fibers_in_nodes, laydown_beam_options, outer_half_axes, write_nodes_subset,
+)
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
-    mass_fraction_speed, pair_options, product_thickness_above_fabric, sheet_thickness,
-    sheet_thickness_above_fabric, write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
+    frame_quaternions, mass_fraction_speed, node_dump_columns, pair_options,
+    product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric, write_sheet_png,
+    write_sheet_vtu, write_yarns, yarn_distances,
 )
-from ..inputs import (
-    LiggghtsInput, dump_format, file_token, fix_ref, jump_if_at_least, step_file_token,
-)
+from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_file_token
 from ..liggghts_log import read_dump, total_wall_time
 from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
@@ -186,10 +187,10 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
               fix_ref(SETTLE_FIX, 1), fix_ref(SETTLE_FIX, 2), fix_ref("drag", 3))
     s.command("thermo_modify", "lost", "ignore")  # losses are caught by the accounting by fiber ID
     s.command("thermo", steps_per_check)
-    s.command("dump", "traj", "all", "custom", steps_per_check, file_token(TRAJ_NAME), "id", "mass",
-              "x", "y", "z", "vx", "vy", "vz", fix_ref("beam", 1), fix_ref("beam", 2))
-    s.command("dump_modify", "traj", "sort", "id", "format",
-              dump_format(["int"] + ["float"] * 9))
+    # collapsed fibers: also the node quaternions (their sections' orientation, the gap check)
+    columns, dump_fmt = node_dump_columns(f)
+    s.command("dump", "traj", "all", "custom", steps_per_check, file_token(TRAJ_NAME), *columns)
+    s.command("dump_modify", "traj", "sort", "id", "format", dump_fmt)
     first = 0
     if resume_step is not None:
         # the snapshots before the restart are kept in traj.dump (the stage cut it there)
@@ -445,15 +446,28 @@ class Laydown(Stage):
                       "sum of LIGGGHTS node masses left (cross-check of sheet_mass)")
         clearances = np.array([element_clearance(*frame_fibers(fr.columns)[::2], pts, offs, rad)
                                if len(fr.ids) else math.inf for fr in frames])
-        # contact radius of every generated node (fix fiber/beam: the larger outer half-axis)
-        node_r = np.max(f_radii[:, :2], axis=1)
+        # sections of every generated node: outer half-axes (a1 != a2: a collapsed fiber's
+        # rectangle, oriented by the dumped node quaternions) and the circles' radius
+        node_axes = f_radii[:, :2]
+        node_r = np.max(node_axes, axis=1)
 
         def frame_gap(columns: Mapping[str, Any]) -> float:
             x, present, offsets = frame_fibers(columns)
-            r = np.concatenate([node_r[f_off[k]:f_off[k + 1]] for k in present])
-            return fiber_fiber_gap(x, offsets, r)
+            sel = np.concatenate([np.arange(f_off[k], f_off[k + 1]) for k in present])
+            q = frame_quaternions(columns)
+            if q is None and f.cross_section != "circular":
+                raise StageError(f"{work / TRAJ_NAME}: no node quaternions (f_beam[4..7]) for the "
+                                 "collapsed fibers' sections: run the lay-down again")
+            return fiber_fiber_gap(x, offsets, node_r[sel], node_axes[sel], q)
 
         fiber_gaps = np.array([frame_gap(fr.columns) if len(fr.ids) else math.inf for fr in frames])
+        # the report's pass-through tolerance: 5 % of the nominal radius, or of a collapsed
+        # fiber's half-thickness a2
+        circular = f.cross_section == "circular"
+        aspect = f.thickness_m / f.width_m if f.thickness_m is not None else 0.25
+        half_thin = min(outer_half_axes(f.cross_section, 0.5 * f.width_m, aspect))  # m: w or a2
+        overlap_tol = 0.05 * half_thin
+        overlap_of = "a radius" if circular else f"the half-thickness a2 ({half_thin * 1e6:.3g} um)"
         max_speeds = np.array([
             float(np.max(np.linalg.norm(np.stack([fr.columns[c] for c in ("vx", "vy", "vz")], 1), axis=1)))
             if len(fr.ids) else 0.0 for fr in frames])
@@ -494,8 +508,10 @@ class Laydown(Stage):
                       "through a yarn)")
         write_dataset(snap, "min_fiber_fiber_gap", fiber_gaps, "m",
                       "smallest surface gap between elements of two different fibers (centre-line "
-                      "distance minus both elements' radii), per snapshot (the contact law keeps "
-                      "it above about -10 nm; below minus the radius: a fiber passes through another)")
+                      "distance minus both elements' section extents along it: circles, or the "
+                      "rectangles 2 a1 x 2 a2 of collapsed fibers), per snapshot (the contact law "
+                      "keeps it above about -10 nm; below minus the radius or half-thickness: a "
+                      "fiber passes through another)")
         write_dataset(snap, "max_speed", max_speeds, "m/s", "largest node speed per snapshot")
         write_dataset(snap, "max_fiber_speed", fiber_speeds, "m/s",
                       "largest fiber centre-of-mass speed per snapshot")
@@ -567,9 +583,10 @@ class Laydown(Stage):
             f"({'OK, >= 0' if clearances.min() >= 0 else 'VIOLATED'}; fiber radius "
             f"{0.5 * f.width_m * 1e6:.1f} um)",
             f"- no fiber passes through another: smallest surface gap between elements of two "
-            f"fibers (centre-line distance minus both radii) over all snapshots: "
-            f"{fiber_gaps.min() * 1e9:.1f} nm "
-            f"({'OK, no overlap beyond 5 % of a radius' if fiber_gaps.min() > -0.025 * f.width_m else 'VIOLATED'})",
+            f"fibers (centre-line distance minus both sections' extents along it: "
+            f"{'circles' if circular else 'the rectangles 2 a1 x 2 a2 of the collapsed fibers'}) "
+            f"over all snapshots: {fiber_gaps.min() * 1e9:.1f} nm "
+            f"({f'OK, no overlap beyond 5 % of {overlap_of}' if fiber_gaps.min() > -overlap_tol else 'VIOLATED'})",
             f"- fiberdem wall time: {wall:.1f} s on {ld.ranks} rank(s)"
             + (f" (this part: resumed from the restart file of step {resume_step})"
                if resume_step is not None else ""), "",
@@ -781,7 +798,8 @@ def approximations(scene: Scene) -> list[str]:
         "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
         + ("node" if ld.yarn_contact_mode == "newton"
            else "contact point of the elements (fix wall/fiber/dlvo)")
-        + "; radius max(a1, a2); "
+        + ("; sections: circles, or the rectangles 2 a1 x 2 a2 of collapsed fibers at their extent "
+           "along the contact normal; " if ld.yarn_contact_mode == "newton" else "; radius max(a1, a2); ")
         + ("the law acts inside each fiber's implicit Newton solve at the end-of-step state "
            "(yarn_contact newton; steric servo S1 in PD form: every fiber-yarn collision sticks)"
            if ld.yarn_contact_mode == "newton" else
@@ -804,7 +822,9 @@ def approximations(scene: Scene) -> list[str]:
         out.append("fiber-fiber contact: pair_style fiber/dlvo " +
                    " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode)) +
                    (" (fibers in contact solved together, law at the closest points of element "
-                    "centre lines, circular sections of the larger half-axis, no self-contact; "
+                    "centre lines; sections are circles, or the thesis' rectangles 2 a1 x 2 a2 of "
+                    "collapsed fibers (contact points moved along the line between the centre "
+                    "lines to the surfaces); no self-contact; "
                     if newton else " (points 'auto' unless given; ") +
                    "steric parameters: the style's defaults, docs/models/contact.md)")
     if ld.walls == "wall_fiber_dlvo":

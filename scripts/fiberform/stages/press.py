@@ -40,11 +40,12 @@ from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, laydown_beam_options, write_nodes_subset
 from ..fiber_sheet import (
     YARNS_FIX, Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
-    frame_fibers, product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric,
-    solid_fraction_profile, static_force_refs, write_sheet_png, write_sheet_vtu, write_yarns,
+    frame_fibers, frame_quaternions, node_dump_columns, node_extents, product_thickness_above_fabric,
+    sheet_thickness, sheet_thickness_above_fabric, solid_fraction_profile, static_force_refs,
+    write_sheet_png, write_sheet_vtu, write_yarns,
 )
 from ..inputs import (
-    LiggghtsInput, Token, dump_format, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
+    LiggghtsInput, Token, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
     print_values, var_distance, var_ref, var_value,
 )
 from ..liggghts_log import read_dump, thermo_rows, total_wall_time
@@ -155,9 +156,11 @@ def plan(scene: Scene, root: Path) -> PressPlan:
     yarns = read_yarns(root / FABRIC_H5)
     # the lay-down's own overlaps (m, >= 0); the element-yarn clearance is measured from the
     # element's centre line, so the surface overlap is the fiber radius minus the clearance
+    # (a collapsed fiber reaches a yarn at least by its half-thickness: the thinner half-axis, a
+    # lower bound of its rectangle's extent, so the guard is not widened by a1 - a2)
     gap_ff, clear = sheet.min_fiber_fiber_gap, sheet.min_element_clearance
     start = (max(0.0, -gap_ff) if math.isfinite(gap_ff) else 0.0,
-             max(0.0, float(np.max(r_node)) - clear) if math.isfinite(clear) else 0.0)
+             max(0.0, float(np.max(np.min(axes, axis=1))) - clear) if math.isfinite(clear) else 0.0)
     return PressPlan(scene, float(np.max(sheet.x[:, 2] + r_node)), yarns.top, t_min, start)
 
 
@@ -187,9 +190,10 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     s.command("variable", "ovl_plate", "equal", fix_ref("plate", 6, negate=True))
     if pair:
         s.command("variable", "ovl_pair", "equal", fix_ref("FIBER_DLVO_STEP", 6, negate=True))
-    s.command("dump", "traj", "all", "custom", p.every, file_token(TRAJ_NAME), "id", "mass",
-              "x", "y", "z", "vx", "vy", "vz", fix_ref("beam", 1), fix_ref("beam", 2))
-    s.command("dump_modify", "traj", "sort", "id", "format", dump_format(["int"] + ["float"] * 9))
+    # collapsed fibers: also the node quaternions (their sections' orientation, the overlaps)
+    columns, dump_fmt = node_dump_columns(f)
+    s.command("dump", "traj", "all", "custom", p.every, file_token(TRAJ_NAME), *columns)
+    s.command("dump_modify", "traj", "sort", "id", "format", dump_fmt)
     s.command("thermo_modify", "lost", "ignore")
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
     plate_words: list[object] = ["terms", ident_list(ld.terms)] + (
@@ -487,7 +491,7 @@ class Press(Stage):
         nbins = max(8, int(math.ceil((z_hi - z_lo) / (0.25 * p.t_min))))
         edges = np.linspace(z_lo, z_hi, nbins + 1)
         x_last = fid_last = off_last = None
-        radii: dict[bytes, Array] = {}  # node radii per set of fibers present (read once)
+        axes: dict[bytes, Array] = {}  # node outer half-axes per set of fibers present (read once)
         for k, st in enumerate(step):
             fr = frames.get(int(st))
             if fr is None:
@@ -497,18 +501,27 @@ class Press(Stage):
                 continue
             x, present, offsets = frame_fibers(fr.columns)
             key = present.tobytes()
-            if key not in radii:
-                radii[key] = np.max(read_fiber_outer_axes(ctx.scene.output_path / FIBERS_H5, present), axis=1)
-            r = radii[key]
+            if key not in axes:
+                axes[key] = read_fiber_outer_axes(ctx.scene.output_path / FIBERS_H5, present)
+            r = np.max(axes[key], axis=1)
             span.append(sheet_thickness(x[:, 2], f.width_m))
             phi = solid_fraction_profile(x, offsets, r, edges, p.area)
             profiles.append(phi)
             above = np.nonzero(phi >= PHI_SHARE * phi.max())[0] if phi.max() > 0 else np.zeros(0, int)
             phi_thick.append(float(edges[above[-1] + 1] - edges[above[0]]) if len(above) else 0.0)
-            ovl_fiber.append(max(0.0, -fiber_fiber_gap(x, offsets, r)) / p.t_min)
-            clear = element_clearance(x, offsets, pts, offs, rad) - float(r.max())
+            q = frame_quaternions(fr.columns)
+            if q is None and f.cross_section != "circular":
+                raise StageError(f"{work / TRAJ_NAME}: no node quaternions (f_beam[4..7]) for the "
+                                 "collapsed fibers' sections: run the press again")
+            # sections: circles, or the collapsed fibers' rectangles (as the lay-down's gaps)
+            ovl_fiber.append(max(0.0, -fiber_fiber_gap(x, offsets, r, axes[key], q)) / p.t_min)
+            # yarns: from the centre lines, less the thinner half-axis (circles: the radius; a
+            # collapsed fiber's rectangle reaches at least that far); plate: each node's extent
+            # upwards (a rectangle's in its frame, as fix wall/fiber/dlvo's plane contact)
+            clear = element_clearance(x, offsets, pts, offs, rad) - float(np.min(axes[key], axis=1).max())
             ovl_yarn.append(max(0.0, -clear) / p.t_min)
-            ovl_plate.append(max(0.0, float(np.max(x[:, 2] + r - plate_z[k]))) / p.t_min)
+            up_ext = r if q is None else node_extents(axes[key], q, np.array([0.0, 0.0, 1.0]))
+            ovl_plate.append(max(0.0, float(np.max(x[:, 2] + up_ext - plate_z[k]))) / p.t_min)
             x_last, fid_last, off_last = x, present, offsets
         if x_last is None or fid_last is None or off_last is None:
             raise StageError(f"{work / TRAJ_NAME}: no snapshot written")
