@@ -203,10 +203,11 @@ def test_collapsed_fibers_rest_on_their_faces(tmp_path: Path, build_dir: Path,
     with every contact inside the Newton solve: the fibers resting on the yarns have their centre
     lines about a2 above the yarn surface, not a1 (circles of the larger half-axis, before session
     16, put them 12 um up); the stage's fiber-fiber gap uses their rectangles (node frames from the
-    dump's quaternions). The thesis' rule exerts no moment about a fiber's axis (the force acts
-    along the line between the centre lines), so a ribbon that tilts against a neighbour can reach
-    into it: measured here -6.1 um (2 a2) in one snapshot (docs/models/contact.md section 9);
-    asserted: no overlap reaches a1 (a centre line through a ribbon's width)."""
+    dump's quaternions). The contact exerts no moment about a fiber's axis (its force passes
+    through the centre lines), so a ribbon that tilts against a neighbour can reach into it:
+    measured here -2.2 um (0.7 a2) in one snapshot with the force along the gap's gradient, -6.1 um
+    (2 a2) with it along the line between the centre lines (docs/models/contact.md section 9);
+    asserted: no overlap reaches a2 (no centre line inside the other ribbon along the normal)."""
     from fiberform.liggghts_log import read_dump
 
     if not (build_dir / "bin" / "fiberdem").is_file():
@@ -220,7 +221,7 @@ def test_collapsed_fibers_rest_on_their_faces(tmp_path: Path, build_dir: Path,
         gaps = h["snapshots/min_fiber_fiber_gap"][...]
         clear = h["sheet/yarn_gap"][...]
     a2 = 0.2 * 15e-6
-    assert np.all(gaps[np.isfinite(gaps)] > -4 * a2), gaps.min()
+    assert np.all(gaps[np.isfinite(gaps)] > -a2), gaps.min()
     report = (run / "laydown" / "report.md").read_text()
     assert "rectangles 2 a1 x 2 a2 of the collapsed fibers" in report
     frames = read_dump(run / "laydown" / "work" / "traj.dump")

@@ -64,6 +64,23 @@ void test_rect_sections() {
   // an axial part of n is dropped; t2 not normal to the axis is made so
   expect(std::fabs(rect_extent(ax, {0.3, 0, 2}, a1, a2, {s2, 0, s2}) - a2) < 1e-18, "rect: axial parts dropped", rect_extent(ax, {0.3, 0, 2}, a1, a2, {s2, 0, s2}), a2);
   expect(std::fabs(rect_extent(ax, up, a1, a2, {1, 0, 0}) - a2) < 1e-18, "rect: along the axis: the smaller half-side");
+  // its gradient with respect to n against central differences, on either face (generic frame)
+  for (const Vec3 n0 : {Vec3{0.3, 0.2, 0.9}, Vec3{0.2, 0.95, 0.1}}) {
+    const Vec3 axg = (1.0 / norm(Vec3{1, 0.2, -0.1})) * Vec3{1, 0.2, -0.1}, t2g{0.1, 0.3, 1.0};
+    const Vec3 n = (1.0 / norm(n0)) * n0;
+    Vec3 g;
+    rect_extent(axg, t2g, a1, a2, n, &g);
+    const double dh = 1e-7;
+    double worst = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      Vec3 dp, dm;
+      dp[i] = dh;
+      dm[i] = -dh;
+      const double fd = (rect_extent(axg, t2g, a1, a2, n + dp) - rect_extent(axg, t2g, a1, a2, n + dm)) / (2 * dh);
+      worst = std::max(worst, std::fabs(fd - g[i]));
+    }
+    expect(worst < 1e-6 * norm(g) + 1e-15, "rect: extent gradient = central differences", worst, 0.0);
+  }
   // nodes: a fiber along x with t1 vertical lies on its edge (make_fiber's frame), turned about its
   // axis (make_ribbon) it lies flat; circles keep their radius
   Fiber edge = make_fiber(2, 40e-6, a1, 0.6 * a1, {0, 0, 0});

@@ -86,12 +86,28 @@ inline Vec3 rect_thickness_dir(Vec3 axis_unit, Vec3 up) {
 // axis (it is made so, by rect_thickness_dir). n's axial part
 // is dropped (contacts at an element's end); n along the axis gives min(a1, a2). Between min(a1, a2)
 // (a face) and hypot(a1, a2) (a corner).
-inline double rect_extent(Vec3 axis_unit, Vec3 t2, double a1, double a2, Vec3 n) {
+// de_dn (optional): the gradient of the extent with respect to n (1/m... m per unit of n), on the
+// active face (the one the line leaves through), 0 when n is along the axis.
+inline double rect_extent(Vec3 axis_unit, Vec3 t2, double a1, double a2, Vec3 n, Vec3 *de_dn = nullptr) {
+  if (de_dn) *de_dn = Vec3{0, 0, 0};
   Vec3 u = n - dot(n, axis_unit) * axis_unit;
   const double lu = norm(u);
   if (!(lu > 1e-9)) return a1 < a2 ? a1 : a2;
+  u = (1.0 / lu) * u;
   const Vec3 e_t = rect_thickness_dir(axis_unit, norm(t2) > 0.0 ? t2 : Vec3{0, 0, 1});
-  return rect_surface_distance(axis_unit, e_t, 2.0 * a1, 2.0 * a2, (1.0 / lu) * u);
+  const double e = rect_surface_distance(axis_unit, e_t, 2.0 * a1, 2.0 * a2, u);
+  if (de_dn) {
+    // e = a / |c| on the active face (c = u.f, f its normal): de/du = -e/c f, and u = P n / |P n|
+    // (P the projection normal to the axis): de/dn = (de/du - (de/du . u) u) / |P n|
+    const Vec3 e_w = cross(e_t, axis_unit);
+    const double cw = dot(u, e_w), ct = dot(u, e_t);
+    const bool thin = std::fabs(ct) > 0.0 && (std::fabs(cw) == 0.0 || a2 / std::fabs(ct) <= a1 / std::fabs(cw));
+    const Vec3 f = thin ? e_t : e_w;
+    const double c = thin ? ct : cw;
+    const Vec3 g = (-e / c) * f;
+    *de_dn = (1.0 / lu) * (g - dot(g, u) * u);
+  }
+  return e;
 }
 
 // ---- force transfer to the nodes (thesis 2.4.2). A force F acting at the centre-line point of

@@ -214,6 +214,7 @@ class ClusterContactModel : public rod::NodeForceModel {
     }
   }
   void begin_fiber(int) override { local_.clear(); }
+  void begin_step(const std::vector<rod::Node> &start, double, double) override { frames_.take(start); }
 
   void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
     near_.clear();
@@ -228,8 +229,18 @@ class ClusterContactModel : public rod::NodeForceModel {
       const Vec3 d = lerp(A0.x, A1.x, s) - (lerp(B0.x, B1.x, t) + lp.shift);
       const double dist = norm(d);
       if (!(dist > 0.0)) continue;
-      const Vec3 n = (1.0 / dist) * d;
-      const double h = dist - element_extent(A0, A1, n) - element_extent(B0, B1, n);
+      Vec3 n = (1.0 / dist) * d;
+      Vec3 deA, deB;
+      double h = dist;
+      if (frames_.any || rect_section(A0) || rect_section(B0)) {
+        // rectangles (frames held over the step); the force along the gap's gradient
+        auto t2 = [&](int i) { return frames_.t2_of(nodes, static_cast<std::size_t>(idx[i])); };
+        h = h - element_extent(A0, A1, t2(0), t2(1), n, &deA) - element_extent(B0, B1, t2(2), t2(3), n, &deB);
+        if (rect_section(A0) || rect_section(A1) || rect_section(B0) || rect_section(B1))
+          n = gap_gradient_dir(n, dist, deA + deB);
+      } else {
+        h = h - element_extent(A0, A1, n) - element_extent(B0, B1, n);  // circles: (dist - r_A) - r_B
+      }
       const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
       near_.push_back({{idx[0], idx[1], idx[2], idx[3]}, {w[0], w[1], w[2], w[3]}, n, h});
       min_gap_ = std::min(min_gap_, h);
@@ -285,6 +296,7 @@ class ClusterContactModel : public rod::NodeForceModel {
   };
   const FiberPartners &partners_;
   const ContactLaw &law_;
+  SectionFrames frames_;  // the rectangles' frames at the start of the step
   std::vector<Local> local_;
   std::vector<Near> near_;
   int contacts_ = 0;
