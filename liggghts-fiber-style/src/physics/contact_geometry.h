@@ -86,7 +86,7 @@ inline Vec3 rect_thickness_dir(Vec3 axis_unit, Vec3 up) {
 // axis (it is made so, by rect_thickness_dir). n's axial part
 // is dropped (contacts at an element's end); n along the axis gives min(a1, a2). Between min(a1, a2)
 // (a face) and hypot(a1, a2) (a corner).
-// de_dn (optional): the gradient of the extent with respect to n (1/m... m per unit of n), on the
+// de_dn (optional): the gradient of the extent with respect to n (m per unit change of n), on the
 // active face (the one the line leaves through), 0 when n is along the axis.
 inline double rect_extent(Vec3 axis_unit, Vec3 t2, double a1, double a2, Vec3 n, Vec3 *de_dn = nullptr) {
   if (de_dn) *de_dn = Vec3{0, 0, 0};

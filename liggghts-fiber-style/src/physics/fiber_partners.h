@@ -230,14 +230,13 @@ class ClusterContactModel : public rod::NodeForceModel {
       const double dist = norm(d);
       if (!(dist > 0.0)) continue;
       Vec3 n = (1.0 / dist) * d;
-      Vec3 deA, deB;
       double h = dist;
-      if (frames_.any || rect_section(A0) || rect_section(B0)) {
+      if (rect_section(A0) || rect_section(A1) || rect_section(B0) || rect_section(B1)) {
         // rectangles (frames held over the step); the force along the gap's gradient
+        Vec3 deA, deB;
         auto t2 = [&](int i) { return frames_.t2_of(nodes, static_cast<std::size_t>(idx[i])); };
         h = h - element_extent(A0, A1, t2(0), t2(1), n, &deA) - element_extent(B0, B1, t2(2), t2(3), n, &deB);
-        if (rect_section(A0) || rect_section(A1) || rect_section(B0) || rect_section(B1))
-          n = gap_gradient_dir(n, dist, deA + deB);
+        n = gap_gradient_dir(n, dist, deA + deB);
       } else {
         h = h - element_extent(A0, A1, n) - element_extent(B0, B1, n);  // circles: (dist - r_A) - r_B
       }

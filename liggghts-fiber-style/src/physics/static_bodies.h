@@ -76,9 +76,9 @@ inline double element_law_radius(const rod::Node &a, const rod::Node &b) {
 }
 // The section frames t2 = R(q) e2 and t3 = R(q) e3 of nodes: from their rotations, or held by a
 // contact model over a step (SectionFrames: the contacts then depend on the positions only, as a
-// circle's do; letting them follow the rotations inside the Newton solve, whose tangent has no
-// contact-rotation terms, cost 135 iterations per fiber and step on case A rectangular's ribbons,
-// measured, against about 20 on circles).
+// circle's do: the tangent has no contact-rotation terms. Together with gap_gradient_dir this took
+// case A rectangular's piled-up ribbons from 135 to 121 Newton iterations per fiber and step,
+// measured; circles need about 20, docs/bench/laydown.md).
 inline Vec3 frame_t2(const rod::Node &a) { return beam::qrot(a.q, Vec3{0, 1, 0}); }
 inline Vec3 frame_t3(const rod::Node &a) { return beam::qrot(a.q, Vec3{0, 0, 1}); }
 struct SectionFrames {
@@ -132,8 +132,8 @@ inline double element_extent(const rod::Node &a, const rod::Node &b, Vec3 n, Vec
 // The direction of steepest increase of a gap h = |d| - e(n) (n = d/|d|, e the extents' sum along
 // n, de_dn its gradient): grad h = n - (I - n n^T) de_dn / |d|, as a unit vector. A rectangle's
 // contact force acts along it (for a circle it is n): so the force is the gradient of the gap's
-// potential and the rank-one tangent along it is consistent (with n instead, Newton needed 135
-// iterations per fiber and step on the piled-up ribbons of case A rectangular, measured).
+// potential and the rank-one tangent along it is consistent (see SectionFrames for what both
+// choices measured).
 inline Vec3 gap_gradient_dir(Vec3 n, double dist, Vec3 de_dn) {
   const Vec3 g = n - (1.0 / dist) * (de_dn - dot(de_dn, n) * n);
   const double lg = norm(g);
