@@ -70,3 +70,37 @@ def test_compare_with_reference(bench: Any, tmp_path: Path) -> None:
     assert c["grammage_map_max_diff_rel"] == 0.0  # same bins
     # the profile: 4 ug moved from slab 11 to slab 12; the reference's largest slab holds 6 ug
     assert c["profile_max_diff_rel"] == pytest.approx(4.0 / 6.0, rel=1e-12)
+
+
+def test_periodic_sheet_measures_wrap_the_unwrapped_chains(bench: Any, tmp_path: Path) -> None:
+    """A periodic lay-down stores unwrapped chains: a fiber whose nodes lie past the piece's sides
+    counts in the bins of their images in the piece (x mod size), so no mass is lost from the map."""
+    write_run(tmp_path)
+    scene = yaml.safe_load((tmp_path / "scene.yaml").read_text())
+    scene["laydown"] = {"walls": "periodic"}
+    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(scene))
+    with h5py.File(tmp_path / "laydown" / "laydown.h5", "r+") as h:
+        x = h["sheet/x"][...]
+        x[3:5, 0] += 3e-3   # fiber 2 one period further in x: the same images
+        x[0:3, 1] -= 3e-3   # fiber 0 one period back in y
+        h["sheet/x"][...] = x
+    m = bench.sheet_measures(tmp_path)
+    cell = (3e-3 / bench.MAP_BINS) ** 2
+    assert m["map"][0, 0] == pytest.approx(6e-9 / cell, rel=1e-9)
+    assert m["map"][-1, -1] == pytest.approx(4e-9 / cell, rel=1e-9)
+    assert m["map"].sum() * cell == pytest.approx(10e-9, rel=1e-12)
+
+
+def test_repeat_piece_is_whole_weave_repeats_at_the_case_grammage(bench: Any) -> None:
+    """The thesis fabric (shed 8, 3000 weft columns and 5000 warps per metre) repeats every
+    8/3000 m along x and 8/5000 m along y: the 3 x 3 mm case piece becomes 1 x 2 repeats,
+    2.6667 x 3.2 mm, with the injected mass scaled by the area (the same injected grammage)."""
+    data = yaml.safe_load((bench.THESIS / "case-C-circular.yaml").read_text())
+    mass = float(data["fibers"]["target_mass_kg"])
+    bench.repeat_piece(data)
+    sx, sy = data["fabric"]["size_x_m"], data["fabric"]["size_y_m"]
+    assert sx == pytest.approx(8 / 3000, rel=1e-12) and sy == pytest.approx(2 * 8 / 5000, rel=1e-12)
+    assert data["fibers"]["target_mass_kg"] / (sx * sy) == pytest.approx(mass / 9e-6, rel=1e-12)
+    assert data["fiber_generation"]["placement_hi_m"][:2] == [sx, sy]
+    name, scene = bench.scene_for("A-circular", "loose_periodic", 2, 1, None, Path("runs/x"))
+    assert scene["laydown"]["walls"] == "periodic" and scene["fabric"]["size_x_m"] == pytest.approx(sx)

@@ -784,3 +784,27 @@ def test_darcy_water_flow_stage_vs_air_permeability_stage(tmp_path: Path) -> Non
     assert imb_w < 0.005 and imb_a < 0.005
     assert k_stage == pytest.approx(k_a, rel=1e-12)
     assert k_w == pytest.approx(k_a, rel=0.01)
+
+
+def test_periodic_sheet_keeps_the_fiber_volume_across_a_side() -> None:
+    """A periodic lay-down stores unwrapped chains: a fiber that runs out of the 200 um piece
+    through x = L (and one through y = 0) puts its whole volume (2 a1)(2 a2) length into the
+    piece's cells once its images are added (periodic_chains), the part past the side in the cells
+    at the opposite side; without the images the clipped part would be lost."""
+    from fiberform.stages.permeability import periodic_chains
+
+    a1, a2, h, L = 16e-6, 4e-6, 50e-6, 200e-6
+    s = _zone_box(L, L, 100e-6, h)
+    lat = make_lattice(s)
+    z = 1e-4 + 75e-6
+    across_x = Chain(np.array([[120e-6, 37e-6, z], [290e-6, 80e-6, z]]), a1, a2)   # out through x = L
+    across_y = Chain(np.array([[60e-6, 150e-6, z], [90e-6, -70e-6, z]]), a1, a2)   # out through y = 0
+    length = math.hypot(170e-6, 43e-6) + math.hypot(30e-6, 220e-6)
+    clipped = float(line_fraction([across_x, across_y], s, lat).sum()) * h**3
+    assert clipped / (4 * a1 * a2 * length) < 0.8  # the test needs the parts outside
+    chains = periodic_chains([across_x, across_y], (L, L))
+    assert len(chains) == 4  # each: itself and one image
+    frac = line_fraction(chains, s, lat)
+    assert float(frac.sum()) * h**3 / (4 * a1 * a2 * length) == pytest.approx(1.0, rel=1e-6)
+    # the part of across_x past x = L lies in the first column of cells (x < h)
+    assert float(frac[0, :, :].sum()) > 0.0

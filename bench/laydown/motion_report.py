@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from fiberform.fiber_io import NODES_NAME
-from fiberform.fiber_sheet import mass_fraction_speed
+from fiberform.fiber_sheet import frame_positions, mass_fraction_speed
 from fiberform.liggghts_log import read_dump
 
 
@@ -58,14 +58,15 @@ def main() -> None:
         v = np.stack([np.bincount(inv, weights=c["mass"] * c[k]) for k in ("vx", "vy", "vz")], 1) / m[:, None]
         w = m / m.sum()
         speed, horiz, vert = np.linalg.norm(v, axis=1), np.linalg.norm(v[:, :2], axis=1), np.abs(v[:, 2])
-        z = np.percentile(c["z"], [50, 90, 99]) * 1e6
+        height = frame_positions(c)[:, 2]  # z, or zu (laydown.walls periodic: unwrapped dump)
+        z = np.percentile(height, [50, 90, 99]) * 1e6
         print(f"| {fr.step * a.dt * 1e3:.1f} | {len(fibers)} | {w[speed > a.speed].sum():.3f} / "
               f"{w[horiz > a.speed].sum():.3f} / {w[vert > a.speed].sum():.3f} | "
               f"{mass_fraction_speed(m, speed, a.fraction) * 1e3:.2f} / "
               f"{mass_fraction_speed(m, vert, a.fraction) * 1e3:.2f} | {z[0]:.0f} / {z[1]:.0f} / {z[2]:.0f} |")
         for k in np.argsort(speed)[::-1][:a.top]:
             sel = fid == fibers[k]
-            zc = float(np.mean(c["z"][sel])) * 1e6
+            zc = float(np.mean(height[sel])) * 1e6
             print(f"|  | fiber {fibers[k]} ({int(sel.sum())} nodes, centre {zc:.0f} um) | v = "
                   f"({v[k, 0] * 1e3:.2f}, {v[k, 1] * 1e3:.2f}, {v[k, 2] * 1e3:.2f}) mm/s | | |")
 

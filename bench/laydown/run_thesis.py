@@ -47,6 +47,11 @@ Variants (``--variants``):
   loose_aa3
            loose with laydown.anderson_depth 3: Anderson mixing of the implicit Newton corrections
            (the same tolerance; fewer iterations in piled-up clusters)
+  loose_repeat, loose_periodic
+           loose on the piece of whole weave repeats nearest the case's (8/3000 x 16/5000 m = 2.667 x
+           3.2 mm for the thesis fabric; injected mass and placement scaled by area), with the four
+           side planes (the thesis' lay-down, sec. 3.1) or periodic in x and y (laydown.walls
+           periodic; issue 15, open question (d): compare with --reference loose_repeat)
   two_way, loose_two_way
            newton / loose with coupling.mode two_way (issue 13): fiberPimpleFoam on one more process
            next to the --ranks fiber ranks, the drag reaction exchanged every coupling.interval
@@ -62,6 +67,7 @@ same sheet): sheet thickness, grammage, the grammage map on a 6 x 6 grid of the 
     .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --variants thesis newton --ranks 2
     .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --max-time 2e-3   # a short probe
     .venv/bin/python bench/laydown/run_thesis.py --cases A-circular --variants loose --ranks 2
+    .venv/bin/python bench/laydown/run_thesis.py --cases C-circular --variants loose --ranks 2 --resume  # after a kill
 
 Writes bench/laydown/results/thesis_laydown.json (rows appended per run; see docs/bench/laydown.md).
 """
@@ -87,6 +93,7 @@ from fiberform.fiber_sheet import product_thickness_above_fabric
 from fiberform.products import read_sheet
 from fiberform.provenance import append_result_rows, atomic_write_text, machine_info
 from fiberform.reuse import adopt_stages
+from fiberform.scene.fabric import FabricSection
 from fiberform.scene import load_scene
 from fiberform.stages import StageContext
 from fiberform.sweep import set_field
@@ -122,15 +129,44 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "loose_dt5": {**LOOSE, "laydown.timestep_s": 5.0e-6, "laydown.friction_stick": 500.0},
     # solver option: Anderson mixing of the Newton corrections over the last 3 (laydown.anderson_depth)
     "loose_aa3": {**LOOSE, "laydown.anderson_depth": 3},
+    # issue 15's open question (d): side planes against periodic x/y, both on a piece of whole
+    # weave repeats (repeat_piece: the 3 x 3 mm piece is not one), the injected mass scaled by area
+    "loose_repeat": {**LOOSE},
+    "loose_periodic": {**LOOSE, "laydown.walls": "periodic"},
 }
+#: variants laid down on the whole-repeat piece of the case's fabric (repeat_piece)
+REPEAT_VARIANTS = ("loose_repeat", "loose_periodic")
 MAP_BINS = 6           # grammage map: bins per side of the fabric piece
 PROFILE_DZ = 10.0e-6   # mass profile through the thickness: slab thickness (m)
 SHARED_STAGES = ("generate", "fabric", "flow")  # stages a variant can take over
 THESIS_PROBE_S = 4.0e-3  # simulated time of the thesis variant unless --max-time is given
 
 
+def repeat_piece(data: dict[str, Any]) -> None:
+    """Put a case scene on the piece of whole weave repeats nearest its own (periodic x/y needs
+    one; the thesis' 3 x 3 mm piece of the eight-shed fabric is 9 weft columns x 15 warps, not a
+    whole number of 8-column repeats): sizes shed / cd_count_per_m and shed / md_count_per_m times
+    the nearest whole numbers, the injected mass and the placement box scaled with the area, so
+    the grammage injected stays the case's."""
+    fab = data.setdefault("fabric", {})
+    defaults = FabricSection()
+    sizes = []
+    for key, count_key in (("size_x_m", "cd_count_per_m"), ("size_y_m", "md_count_per_m")):
+        size = float(fab.get(key, getattr(defaults, key)))
+        repeat = float(fab.get("shed", defaults.shed)) / float(fab.get(count_key, getattr(defaults, count_key)))
+        sizes.append((size, repeat * max(1, round(size / repeat))))
+    f = data["fibers"]
+    f["target_mass_kg"] = float(f["target_mass_kg"]) * (sizes[0][1] * sizes[1][1]) / (sizes[0][0] * sizes[1][0])
+    fab["size_x_m"], fab["size_y_m"] = sizes[0][1], sizes[1][1]
+    gen = data.get("fiber_generation", {})
+    if "placement_hi_m" in gen:
+        gen["placement_hi_m"] = [sizes[0][1], sizes[1][1], gen["placement_hi_m"][2]]
+
+
 def scene_for(case: str, variant: str, ranks: int, seed: int, max_time: float | None, runs: Path) -> tuple[str, dict[str, Any]]:
     data = yaml.safe_load((THESIS / f"case-{case}.yaml").read_text())
+    if variant in REPEAT_VARIANTS:
+        repeat_piece(data)
     for path, value in VARIANTS[variant].items():
         if path == "laydown.fiber_contact":
             use_fiber_contact(data, value)
@@ -163,7 +199,7 @@ def donor_stages(runs: Path, case: str, seed: int, target: Path, build: Path) ->
 
 
 def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | None, runs: Path,
-            build: Path) -> dict[str, Any]:
+            build: Path, resume: bool = False) -> dict[str, Any]:
     name, data = scene_for(case, variant, ranks, seed, max_time, runs)
     out = ROOT / runs / name
     out.mkdir(parents=True, exist_ok=True)
@@ -172,7 +208,8 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
     donor_stages(ROOT / runs, case, seed, out, build)
     t0 = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "fiberform", "run", str(scene), "--to", "laydown",
-                           "--build-dir", str(build)], cwd=ROOT, capture_output=True, text=True)
+                           "--build-dir", str(build), *(["--resume"] if resume else [])],
+                          cwd=ROOT, capture_output=True, text=True)
     total = time.monotonic() - t0
     rss_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     row: dict[str, Any] = {"case": case, "variant": variant, "ranks": ranks, "seed": seed,
@@ -230,7 +267,9 @@ def sheet_measures(run_dir: Path) -> dict[str, Any]:
     sheet = read_sheet(run_dir / "laydown" / "laydown.h5")
     with h5py.File(run_dir / "laydown" / "laydown.h5", "r") as h:
         top = float(h["run"].attrs["fabric_top_m"])
-    x = sheet.x
+    x = sheet.x.copy()
+    if scene.get("laydown", {}).get("walls") == "periodic":  # unwrapped chains: their images in the piece
+        x[:, 0], x[:, 1] = np.mod(x[:, 0], sx), np.mod(x[:, 1], sy)
     counts = np.diff(sheet.offsets)
     m = np.repeat(fiber_mass[sheet.fiber_id] / counts, counts)
     gmap, _, _ = np.histogram2d(x[:, 0], x[:, 1], bins=[np.linspace(0.0, sx, MAP_BINS + 1),
@@ -273,6 +312,9 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=HERE / "results" / "thesis_laydown.json")
     ap.add_argument("--reference", default="newton", choices=sorted(VARIANTS),
                     help="variant the others' sheets are compared with (default: newton)")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue each run's interrupted lay-down from its last restart file (fiberform run "
+                         "--resume); without it an interrupted lay-down starts over")
     args = ap.parse_args()
     for case in args.cases:
         if not (THESIS / f"case-{case}.yaml").is_file():
@@ -287,7 +329,7 @@ def main() -> int:
         for seed in args.seeds:
             for variant in args.variants:
                 for ranks in args.ranks:
-                    row = run_one(case, variant, ranks, seed, args.max_time, args.runs, build)
+                    row = run_one(case, variant, ranks, seed, args.max_time, args.runs, build, args.resume)
                     row["machine"] = machine_info()
                     refs = [r for r in old + rows if r.get("case") == case and r.get("seed") == seed
                             and r.get("variant") == args.reference and r.get("exit") == 0 and r.get("settled")

@@ -13,6 +13,7 @@
 
 #include "atom.h"
 #include "comm.h"
+#include "domain.h"
 #include "error.h"
 #include "modify.h"
 #include "fix_fiber_beam.h"
@@ -130,6 +131,7 @@ double FixFiberDrag::element_force(int i, int j, double fe[3], double *jac) cons
   const double len = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
   fe[0] = fe[1] = fe[2] = 0.0;
   if (drag_on_) {
+    domain->remap(c);  // periodic x/y: the element centre's image in the box (the flow grid's)
     const flow::Vec3 u = flow_->velocity({c[0], c[1], c[2]}, update->get_cur_time());
     const drag::Vec3 vrel{u[0] - vc[0], u[1] - vc[1], u[2] - vc[2]};
     const drag::Vec3 f = drag::drag_per_length(rho_f_, mu_, d, vrel);
@@ -164,7 +166,8 @@ void FixFiberDrag::post_force(int) {
     // no reverse communication, and both halves are bit-identical
     for (int side = 0; side < 2; ++side) {
       if ((side == 0 && idx == 0) || (side == 1 && idx == cnt - 1)) continue;
-      const int j = atom->map(atom->tag[i] + (side == 0 ? -1 : 1));
+      int j = atom->map(atom->tag[i] + (side == 0 ? -1 : 1));
+      if (j >= 0) j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
       if (j < 0)
         fiberform::fail_one(lmp, FLERR, "fix fiber/drag: the neighbour node of an element is not on this rank or was lost (a node left the box: check the boundary and the lost-atoms warning), or the ghost cut-off is too short");
       double fe[3], je[6];

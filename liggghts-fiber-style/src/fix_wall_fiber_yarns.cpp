@@ -17,6 +17,7 @@
 
 #include "atom.h"
 #include "comm.h"
+#include "domain.h"
 #include "error.h"
 #include "fix_fiber_beam.h"
 #include "modify.h"
@@ -133,8 +134,9 @@ void FixWallFiberYarns::init() {
     beam_->section_radii(i, rr);
     loc[0] = std::max(loc[0], std::max(rr[0], rr[1]));
     if (beam_->node_index(i) + 1 < beam_->node_count(i)) {
-      const int j = atom->map(atom->tag[i] + 1);
+      int j = atom->map(atom->tag[i] + 1);
       if (j >= 0) {
+        j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
         double l2 = 0.0;
         for (int k = 0; k < 3; ++k) l2 += (atom->x[j][k] - atom->x[i][k]) * (atom->x[j][k] - atom->x[i][k]);
         loc[1] = std::max(loc[1], std::sqrt(l2));
@@ -349,8 +351,9 @@ void FixWallFiberYarns::scan_contacts() {
     int nh = 0;
     if (beam_->node_count(i) > 1) {
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
-      const int j = atom->map(atom->tag[i] + 1);
+      int j = atom->map(atom->tag[i] + 1);
       if (j < 0) continue;  // not present here (fix fiber/beam's ghost cut-off covers an element)
+      j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
       const phys::rod::Node b = section(j);
       const double r = phys::element_reach(a, b);
       nh = bodies_.element_hits(a.x, b.x, r, law().h_cut + r, hits);
@@ -396,10 +399,11 @@ void FixWallFiberYarns::post_force(int) {
       // element to the next node (owned by this node); a fiber's elements cover its nodes
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
       int j = atom->map(atom->tag[i] + 1);
+      if (j >= 0) j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
       if (j < 0 || j >= nlocal)
         fiberform::fail_one(lmp, FLERR, "fix wall/fiber/yarns: the next node of an element is not owned by this "
-                          "rank (implicit_force impulse|position runs the element contact on one rank only; "
-                          "implicit_force newton runs on any number)");
+                          "rank (implicit_force impulse|position runs the element contact on one rank only and "
+                          "without periodic x/y; implicit_force newton runs on any number and with periodic x/y)");
       double rj[4];
       beam_->section_radii(j, rj);
       element_yarn_contacts(i, j, std::max(r1, std::max(rj[0], rj[1])), gap_min);

@@ -219,13 +219,17 @@ def laydown_beam_options(ld: Any) -> tuple[object, ...]:
 
 
 def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,
-                   restart: Token | None = None, flat_decomposition: bool = False) -> None:
+                   restart: Token | None = None, flat_decomposition: bool = False,
+                   periodic_xy: bool = False) -> None:
     """The LIGGGHTS commands that load the generated fibers (DATA_NAME, NODES_NAME in the working
     folder) under fix fiber/beam with ID ``beam``; ``beam_options`` are appended to that fix.
     With ``restart`` (a restart file of an earlier run of the same input) the atoms, the box and
     the per-atom state of fix fiber/beam come from that file instead of DATA_NAME (units, atom
     style, boundary and newton are stored in it). ``flat_decomposition``: MPI ranks split the box
-    in x and y only (a sheet is a thin layer: a split in z would leave it on one rank)."""
+    in x and y only (a sheet is a thin layer: a split in z would leave it on one rank).
+    ``periodic_xy``: ``boundary p p f`` (laydown.walls periodic) instead of ``f f f``; read_data
+    maps nodes outside the box in x or y into it and keeps their image flags, so the unwrapped
+    positions (dump ``xu yu zu``) continue the chains as written."""
     s.command("units", "si")
     if flat_decomposition:
         s.command("processors", STAR, STAR, 1)
@@ -233,7 +237,7 @@ def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object
         s.command("atom_style", "sphere")
     s.command("atom_modify", "map", "array", "sort", 0, 0.0)
     if restart is None:
-        s.command("boundary", "f", "f", "f")
+        s.command("boundary", *(("p", "p", "f") if periodic_xy else ("f", "f", "f")))
         s.command("newton", "on" if newton else "off")
         s.command("communicate", "single", "vel", "yes")
         s.command("read_data", file_token(DATA_NAME))

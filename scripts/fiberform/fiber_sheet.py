@@ -4,6 +4,13 @@
 yarn file, the sheet's geometric measures (gaps, clearances, thickness, thickness above the
 fabric, solid fraction) and its pictures. Stages import this module, never each other
 (docs/stages/pipeline.md).
+
+Periodic lateral boundaries (``laydown.walls: periodic``): the box [0, Lx] x [0, Ly] is periodic
+in x and y (:func:`lateral_period`); the yarns are tiled over the box's neighbouring images
+(:func:`tile_yarns`); the node dump holds the unwrapped positions ``xu yu zu``, so the chains
+are continuous and may reach up to a fiber length out of the box; consumers that clip to the box
+take the chains' images that reach into it (:func:`periodic_images`), node measures wrap the
+nodes into the box (:func:`wrap_points`).
 """
 
 from __future__ import annotations
@@ -99,14 +106,26 @@ YARNS_FIX = "yarns"
 SIDE_WALL_IDS = ("wall0", "wall1", "wall2", "wall3")
 
 
+def lateral_period(scene: Scene) -> tuple[float, float] | None:
+    """(Lx, Ly), m: the periods of the box in x and y with ``laydown.walls: periodic`` (the
+    domain's x and y extent, which is the fabric piece, from 0); None with side planes."""
+    ld, dom = scene.laydown, scene.domain
+    if ld is None or ld.walls != "periodic" or dom is None:
+        return None
+    return (dom.hi_m[0] - dom.lo_m[0], dom.hi_m[1] - dom.lo_m[1])
+
+
 def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
     """The sheet's contacts, as the laydown section sets them: the four side planes (``walls``;
-    ``fiber_yarns``: fix wall/fiber/dlvo acting as the yarns do), fix wall/fiber/yarns on the yarns
-    of ``yarns_file`` and, with a contact section, pair_style fiber/dlvo between fibers."""
+    ``fiber_yarns``: fix wall/fiber/dlvo acting as the yarns do; ``periodic``: none), fix
+    wall/fiber/yarns on the yarns of ``yarns_file`` (periodic: the tiled yarns, :func:`write_yarns`)
+    and, with a contact section, pair_style fiber/dlvo between fibers."""
     ld = scene.laydown
     assert ld is not None
     planes = side_planes(scene)
-    if ld.walls == "fiber_yarns":  # the yarns' law, mode and friction (docs/stages/laydown.md)
+    if ld.walls == "periodic":  # boundary p p f (fiber_preamble): no side planes
+        pass
+    elif ld.walls == "fiber_yarns":  # the yarns' law, mode and friction (docs/stages/laydown.md)
         for k, p in enumerate(planes):
             s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, *static_body_words(ld))
     elif ld.walls == "wall_gran":  # stock LIGGGHTS granular walls (comparison option)
@@ -138,17 +157,134 @@ def static_force_refs(scene: Scene) -> list[tuple[str, int]]:
     return [(YARNS_FIX, 4), *sides]
 
 
-def write_yarns(path: Path, fabric_h5: Path) -> Yarns:
+def write_yarns(path: Path, fabric_h5: Path, period: tuple[float, float] | None = None) -> Yarns:
     """The fabric's yarn centrelines as fix wall/fiber/yarns reads them: ``yarn x y z radius``; returns
-    the yarns read (products.read_yarns)."""
+    the yarns written: those of fabric.h5 (products.read_yarns) or, with ``period`` (Lx, Ly) in m
+    (:func:`lateral_period`), the yarns tiled over the periodic box and its neighbours
+    (:func:`tile_yarns`)."""
     yarns = read_yarns(fabric_h5)
+    if period is not None:
+        yarns = tile_yarns(yarns, period)
     pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
     with open(path, "w") as fh:
-        fh.write("# yarn-index x y z radius (m), from fabric.h5 /yarns\n")
+        fh.write("# yarn-index x y z radius (m), from fabric.h5 /yarns"
+                 + (" tiled over the periodic box and its 8 neighbours\n" if period is not None else "\n"))
         for k in range(len(rad)):
             for p in pts[offs[k]:offs[k + 1]]:
                 fh.write(f"{k} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} {float(rad[k])!r}\n")
     return yarns
+
+
+def tile_yarns(yarns: Yarns, period: tuple[float, float]) -> Yarns:
+    """The yarns of a generated fabric of whole weave repeats (fabric.size_x_m, size_y_m =
+    ``period`` (Lx, Ly), m, the box from 0) tiled over the box and its 8 neighbouring periodic
+    images, m. A yarn runs along x (a warp) or y (a weft), whichever its centre line spans more;
+    the yarns whose centre line lies across in [0, L) (the other axis) are the box's own, the others
+    (the generator's yarns reaching into the piece from outside) are their images and dropped.
+    Each own yarn is cut at 0 and L along its direction (points interpolated on its polyline) and
+    its three copies shifted by -L, 0, +L along it are joined into ONE chain over [-L, 2L] (fix
+    wall/fiber/yarns takes the closest segment per yarn, so a joint is no second contact); that
+    chain is repeated at -L, 0, +L across (distinct yarn indices). Raises ValueError if a yarn does
+    not cover [0, L] with increasing coordinates or its ends at 0 and L differ by more than
+    1e-9 L (the fabric is not periodic: not whole weave repeats)."""
+    pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
+    out_pts: list[Array] = []
+    out_rad: list[float] = []
+    for k in range(len(rad)):
+        p = pts[offs[k]:offs[k + 1]]
+        span = np.ptp(p[:, :2], axis=0)
+        a = 0 if span[0] >= span[1] else 1  # along the yarn
+        b = 1 - a  # across
+        if not 0.0 <= float(np.mean(p[:, b])) < period[b]:
+            continue  # an image of one of the box's yarns
+        s, length = p[:, a], period[a]
+        if np.any(np.diff(s) <= 0.0) or s[0] > 0.0 or s[-1] < length:
+            raise ValueError(f"yarn {k}: its centre line does not run across the periodic box "
+                             f"[0, {length!r}] m along {'xy'[a]} with increasing coordinates")
+        ends = np.array([[np.interp(v, s, p[:, j]) for j in range(3)] for v in (0.0, length)])
+        ends[0, a], ends[1, a] = 0.0, length
+        piece = np.vstack([ends[:1], p[(s > 0.0) & (s < length)], ends[1:]])
+        along = np.zeros(3)
+        along[a] = length
+        if float(np.max(np.abs(piece[-1] - along - piece[0]))) > 1e-9 * length:
+            raise ValueError(f"yarn {k}: its ends at {'xy'[a]} = 0 and {length!r} m differ: the "
+                             "fabric is not periodic (not whole weave repeats)")
+        chain = np.vstack([piece[:-1] - along, piece[:-1], piece + along])
+        across = np.zeros(3)
+        across[b] = period[b]
+        for shift in (-1.0, 0.0, 1.0):
+            out_pts.append(chain + shift * across)
+            out_rad.append(float(rad[k]))
+    counts = [len(c) for c in out_pts]
+    return Yarns(np.vstack(out_pts) if out_pts else np.zeros((0, 3)),
+                 np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+                 np.array(out_rad, dtype=np.float64))
+
+
+def periodic_images(x: Array, offsets: npt.NDArray[Any], period: Sequence[float], margin: float = 0.0
+                    ) -> tuple[Array, npt.NDArray[np.int64], npt.NDArray[np.int64], Array]:
+    """The copies of the chains (nodes ``x`` (n, 3), m; chain k owns x[offsets[k]:offsets[k+1]])
+    shifted by whole periods in x and y that reach into the box [0, Lx] x [0, Ly] grown by
+    ``margin`` (m): for the consumers that clip a periodic sheet (unwrapped chains, up to a fiber
+    length out of the box) to the box. ``period`` (Lx, Ly), m; 0 for an axis that is not periodic
+    (no shifts along it). A chain inside the box gives itself; one across a side gives itself and
+    the image on the other side. Returns (the copies' nodes, their offsets, the chain each copy
+    is of, each copy's shift (c, 3), m), copies by chain, then by shift in x, then y."""
+    out: list[Array] = []
+    src: list[int] = []
+    shifts: list[Array] = []
+    for k in range(len(offsets) - 1):
+        c = x[offsets[k]:offsets[k + 1]]
+        if len(c) == 0:
+            continue
+        ranges = []
+        for axis in (0, 1):
+            length = float(period[axis])
+            if length <= 0.0:
+                ranges.append([0])
+                continue
+            lo, hi = float(c[:, axis].min()), float(c[:, axis].max())
+            ranges.append(list(range(math.ceil((-margin - hi) / length),
+                                     math.floor((length + margin - lo) / length) + 1)))
+        for i in ranges[0]:
+            for j in ranges[1]:
+                d = np.array([i * float(period[0]), j * float(period[1]), 0.0])
+                out.append(c + d)
+                src.append(k)
+                shifts.append(d)
+    counts = [len(c) for c in out]
+    return (np.vstack(out) if out else np.zeros((0, 3)),
+            np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+            np.array(src, dtype=np.int64), np.array(shifts).reshape(-1, 3))
+
+
+def wrap_points(x: Array, period: Sequence[float] | None) -> Array:
+    """The points ``x`` (n, 3), m, mapped into the periodic box [0, Lx) x [0, Ly) (each on its
+    own: for node measures against :func:`tile_yarns`); unchanged without ``period``."""
+    if period is None:
+        return x
+    out = np.array(x, dtype=np.float64, copy=True)
+    for axis in (0, 1):
+        if period[axis] > 0.0:
+            out[:, axis] = np.mod(out[:, axis], period[axis])
+    return out
+
+
+def wrap_chains(x: Array, offsets: npt.NDArray[Any], period: Sequence[float] | None) -> Array:
+    """The chains (nodes ``x`` (n, 3), m, by ``offsets``) each shifted by whole periods so that its
+    first node lies in the box [0, Lx) x [0, Ly) (a chain stays continuous: for element measures
+    against :func:`tile_yarns`, whose yarns cover one period around the box); unchanged without
+    ``period``."""
+    if period is None:
+        return x
+    out = np.array(x, dtype=np.float64, copy=True)
+    for lo, hi in zip(offsets[:-1], offsets[1:]):
+        if hi <= lo:
+            continue
+        for axis in (0, 1):
+            if period[axis] > 0.0:
+                out[lo:hi, axis] -= math.floor(out[lo, axis] / period[axis]) * period[axis]
+    return out
 
 
 def yarn_distances(x: Array, pts: Array, offs: Array, rad: Array) -> Array:
@@ -236,8 +372,20 @@ def node_extents(axes: Array, q: Array, n: Array) -> Array:
     return np.asarray(np.where(rect, ext, axes[:, 0]))
 
 
+def _image_shifts(p1: Array, q1: Array, p2: Array, q2: Array, period: Sequence[float]) -> Array:
+    """(n, m, 3), m: the whole-period shifts in x and y that bring each segment p2-q2 (m, 3) to
+    its image closest to each segment p1-q1 (n, 3), by their midpoints (exact for segments
+    shorter than half a period); 0 along an axis of period 0."""
+    diff = 0.5 * (p2 + q2)[None, :, :] - 0.5 * (p1 + q1)[:, None, :]
+    out = np.zeros_like(diff)
+    for axis in (0, 1):
+        if period[axis] > 0.0:
+            out[..., axis] = -np.round(diff[..., axis] / period[axis]) * period[axis]
+    return out
+
+
 def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None = None,
-                    q: Array | None = None) -> float:
+                    q: Array | None = None, period: Sequence[float] | None = None) -> float:
     """Smallest surface gap between elements of DIFFERENT fibers, m: |d| - e_A(n) - e_B(n), d the
     closest point of element A's centre line minus that of B's (parameters clamped to [0, 1]),
     n = d / |d|, e the element's section extent along n. Sections as the fibers' contacts inside
@@ -250,7 +398,8 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None 
     about its chord with the larger a1 and a2 of its rectangular nodes and t2 the sum of its nodes'
     (:func:`rect_extent`); touching centre lines (|d| = 0) take min(a1, a2). The contact law keeps
     the gap above about -10 nm; below minus the radius (thickness) a centre line is inside another
-    fiber (a pass-through). inf with fewer than two fibers."""
+    fiber (a pass-through). ``period`` (Lx, Ly), m (periodic x/y, unwrapped chains): each pair of
+    elements at its closest periodic image. inf with fewer than two fibers."""
     owner = np.concatenate([np.full(max(0, hi - lo - 1), k) for k, (lo, hi) in
                             enumerate(zip(offsets[:-1], offsets[1:]))] or [np.zeros(0)]).astype(np.int64)
     idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])
@@ -264,7 +413,12 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None 
     out = math.inf
     if not np.any(is_rect):  # circles
         for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
-            d = _all_pairs(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+            if period is None:
+                d = _all_pairs(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1])
+            else:
+                sh = _image_shifts(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1], period)
+                d = segment_distances(x[idx[chunk]][:, None, :], x[idx[chunk] + 1][:, None, :],
+                                      x[idx][None, :, :] + sh, x[idx + 1][None, :, :] + sh)
             d = d - r_el[chunk][:, None] - r_el[None, :]
             d[owner[chunk][:, None] == owner[None, :]] = math.inf
             out = min(out, float(d.min()))
@@ -289,8 +443,10 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None 
         return np.where(is_rect[k], rect_extent(axis[k], t2[k], a1[k], a2[k], n), r_el[k])
 
     for chunk in np.array_split(np.arange(len(idx)), max(1, len(idx) // 200)):
+        sh = (np.zeros(3) if period is None else
+              _image_shifts(x[idx[chunk]], x[idx[chunk] + 1], x[idx], x[idx + 1], period))
         d = segment_closest_differences(x[idx[chunk]][:, None, :], x[idx[chunk] + 1][:, None, :],
-                                        x[idx][None, :, :], x[idx + 1][None, :, :])
+                                        x[idx][None, :, :] + sh, x[idx + 1][None, :, :] + sh)
         dist = np.linalg.norm(d, axis=-1)
         same = owner[chunk][:, None] == owner[None, :]
         upper = dist - lo_e[chunk][:, None] - lo_e[None, :]  # >= the gap
@@ -310,15 +466,34 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None 
 QUAT_COLUMNS = ("f_beam[4]", "f_beam[5]", "f_beam[6]", "f_beam[7]")
 
 
-def node_dump_columns(f: Any) -> tuple[list[object], Token]:
+#: the dump columns of the node positions: as LIGGGHTS keeps them (in the box in periodic
+#: directions) and unwrapped (periodic x/y: continuous chains)
+POSITION_COLUMNS = ("x", "y", "z")
+UNWRAPPED_COLUMNS = ("xu", "yu", "zu")
+
+
+def node_dump_columns(f: Any, periodic: bool = False) -> tuple[list[object], Token]:
     """The columns of the stages' node dump (``dump ... custom``) and its ``dump_modify format``:
-    id, mass, position (m), velocity (m/s), fiber ID and node index (f_beam[1], f_beam[2]) and, for
-    collapsed fibers (``fibers.cross_section`` rectangular), the node quaternions
+    id, mass, position (m; ``periodic`` (x/y): the unwrapped :data:`UNWRAPPED_COLUMNS`, so that
+    the chains are continuous), velocity (m/s), fiber ID and node index (f_beam[1], f_beam[2]) and,
+    for collapsed fibers (``fibers.cross_section`` rectangular), the node quaternions
     :data:`QUAT_COLUMNS` (the sections' orientation, for :func:`fiber_fiber_gap`)."""
-    cols: list[object] = ["id", "mass", "x", "y", "z", "vx", "vy", "vz", fix_ref("beam", 1), fix_ref("beam", 2)]
+    pos = UNWRAPPED_COLUMNS if periodic else POSITION_COLUMNS
+    cols: list[object] = ["id", "mass", *pos, "vx", "vy", "vz", fix_ref("beam", 1), fix_ref("beam", 2)]
     if f.cross_section != "circular":
         cols += [fix_ref("beam", k) for k in range(4, 8)]
     return cols, dump_format(["int"] + ["float"] * (len(cols) - 1))
+
+
+def position_columns(columns: Mapping[str, Any]) -> tuple[str, str, str]:
+    """The position columns of a dump frame: the unwrapped ones if the dump has them (periodic
+    x/y), else x y z."""
+    return UNWRAPPED_COLUMNS if all(c in columns for c in UNWRAPPED_COLUMNS) else POSITION_COLUMNS
+
+
+def frame_positions(columns: Mapping[str, Any]) -> Array:
+    """Node positions (n, 3), m, of a dump frame in its row order (:func:`position_columns`)."""
+    return np.stack([np.asarray(columns[c], dtype=np.float64) for c in position_columns(columns)], axis=1)
 
 
 def _frame_order(columns: Mapping[str, Any]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -337,10 +512,11 @@ def frame_quaternions(columns: Mapping[str, Any]) -> Array | None:
 
 
 def frame_fibers(columns: Mapping[str, Any]) -> tuple[Array, Array, Array]:
-    """Node positions of a dump frame ordered by fiber then node, with the fiber IDs (0-based)
-    and the offsets of each fiber's nodes."""
+    """Node positions of a dump frame ordered by fiber then node (unwrapped when the dump has
+    ``xu yu zu``: :func:`position_columns`), with the fiber IDs (0-based) and the offsets of each
+    fiber's nodes."""
     fid, order = _frame_order(columns)
-    x = np.stack([np.asarray(columns[c])[order] for c in ("x", "y", "z")], axis=1)
+    x = np.stack([np.asarray(columns[c])[order] for c in position_columns(columns)], axis=1)
     fids = fid[order]
     present, counts = np.unique(fids, return_counts=True)
     return x, present, np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -459,11 +635,13 @@ def write_sheet_vtu(path: Path, x: Array, fiber: Array, offsets: Array) -> None:
     Path(str(base) + ".vtu").replace(path)
 
 
-def write_sheet_png(path: Path, x: Array, offsets: Array, pts: Array, offs: Array, rad: Array,
-                    title: str, box: tuple[list[float], list[float]],
-                    plate_z: float | None = None) -> None:
+def write_sheet_png(path: Path, x: Array, offsets: npt.NDArray[Any], pts: Array, offs: Array, rad: Array,
+                    title: str, box: tuple[list[float], list[float]], plate_z: float | None = None,
+                    colour_of: Sequence[int] | npt.NDArray[np.int64] | None = None) -> None:
     """Side (x-z) and top (x-y) views of the sheet on the fabric (yarns in grey); ``plate_z``: a
-    press plate's height, drawn dashed in the side view."""
+    press plate's height, drawn dashed in the side view; ``colour_of``: the colour index of each
+    chain (default: its position; periodic images of one fiber share their fiber's,
+    :func:`periodic_images`). Both views clip at the box's x (and y) range."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -478,8 +656,9 @@ def write_sheet_png(path: Path, x: Array, offsets: Array, pts: Array, offs: Arra
     cmap = plt.get_cmap("tab20")
     for k in range(len(offsets) - 1):
         p = x[offsets[k]:offsets[k + 1]]
-        ax1.plot(p[:, 0] * 1e3, p[:, 2] * 1e3, color=cmap(k % 20), lw=1.5, zorder=2)
-        ax2.plot(p[:, 0] * 1e3, p[:, 1] * 1e3, color=cmap(k % 20), lw=1.5, zorder=2)
+        colour = cmap((k if colour_of is None else int(colour_of[k])) % 20)
+        ax1.plot(p[:, 0] * 1e3, p[:, 2] * 1e3, color=colour, lw=1.5, zorder=2)
+        ax2.plot(p[:, 0] * 1e3, p[:, 1] * 1e3, color=colour, lw=1.5, zorder=2)
     ax1.set(xlabel="x (mm)", ylabel="z (mm)", title="side view (x-z), fabric in grey",
             xlim=(box[0][0] * 1e3, box[1][0] * 1e3))
     ax2.set(xlabel="x (mm)", ylabel="y (mm)", title="top view (x-y)", aspect="equal",

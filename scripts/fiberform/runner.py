@@ -196,7 +196,8 @@ def run(
     tail: deque[str] = deque(maxlen=tail_lines)
     start = time.monotonic()
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(log_path, "w", encoding="utf-8", errors="replace") as logf:
+    # line-buffered: the log follows a long run (progress, post-mortem of a killed one)
+    with open(log_path, "w", encoding="utf-8", errors="replace", buffering=1) as logf:
         try:
             proc = subprocess.Popen(
                 full,

@@ -49,11 +49,14 @@ class LaydownSection(_Section):
         "Fibers with a node below this height are removed (absent: fabric lower side - 50 um)",
         "m", default=None, ge=-10.0, le=10.0,
     )  # fmt: skip
-    walls: Literal["fiber_yarns", "wall_fiber_dlvo", "wall_gran"] = choice(
-        "The four vertical side planes: fiber_yarns (fix wall/fiber/dlvo acting as the yarns do: "
-        "their law terms, yarn_contact mode and friction), wall_fiber_dlvo (fix wall/fiber/dlvo with "
-        "the law terms and contact integrator only) or wall_gran "
-        "(stock LIGGGHTS fix wall/gran, Hertz, frictionless; for comparisons)",
+    walls: Literal["fiber_yarns", "wall_fiber_dlvo", "wall_gran", "periodic"] = choice(
+        "The lateral boundaries: four vertical side planes, fiber_yarns (fix wall/fiber/dlvo acting "
+        "as the yarns do: their law terms, yarn_contact mode and friction), wall_fiber_dlvo (fix "
+        "wall/fiber/dlvo with the law terms and contact integrator only) or wall_gran "
+        "(stock LIGGGHTS fix wall/gran, Hertz, frictionless; for comparisons); or periodic: no side "
+        "planes, the box is periodic in x and y, the fabric's yarns tiled over the neighbouring "
+        "periodic images (needs a generated fabric of whole weave repeats, yarn_contact newton and "
+        "coupling one_way; the frozen flow is not periodic at the box sides)",
         default="fiber_yarns",
     )
     terms: list[ContactTerm] = choice(
@@ -182,6 +185,11 @@ class LaydownSection(_Section):
         if self.fiber_contact == "newton" and self.beam_integrator == "explicit":
             raise scene_problem("fiber_contact", "newton needs beam_integrator implicit (allowed "
                                 "with explicit: averaged)", self.fiber_contact)
+        if self.walls == "periodic" and self.yarn_contact_mode != "newton":
+            raise scene_problem("yarn_contact", "walls periodic needs yarn_contact newton (the "
+                                "averaged yarn contact needs both nodes of an element in one "
+                                "periodic image; with beam_integrator explicit yarn_contact is "
+                                "averaged)", self.yarn_contact_mode)
         if (self.yarn_contact_mode == "newton" and self.walls != "wall_fiber_dlvo"
                 and "contact_integrator" in self.model_fields_set):
             raise scene_problem("contact_integrator", "only used with yarn_contact averaged or "

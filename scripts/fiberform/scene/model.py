@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, Literal
@@ -102,6 +103,46 @@ class Scene(_Section):
             raise scene_problem("run", "required when demo_particles is present (its time step and ranks)")
         return self
 
+    @model_validator(mode="after")
+    def _check_periodic(self) -> Scene:
+        """laydown.walls periodic: a one-way lay-down on a generated fabric of whole weave repeats
+        that fills the domain in x and y, with fibers shorter than the period (the yarns are tiled
+        over one neighbouring image on each side)."""
+        ld, fab = self.laydown, self.fabric
+        if ld is None or ld.walls != "periodic":
+            return self
+        if self.coupling is not None and self.coupling.mode == "two_way":
+            raise scene_problem("laydown.walls", "periodic is one-way only: the coupled fluid case "
+                                "(coupling.mode two_way) has symmetry sides, not periodic ones; use "
+                                "side planes (fiber_yarns) or coupling one_way", ld.walls)
+        if fab is None:
+            return self  # no lay-down without a fabric (the stage requires the section)
+        if fab.source != "generate":
+            raise scene_problem("fabric.source", "laydown.walls periodic needs a generated fabric "
+                                "(whole weave repeats, tiled over the periodic images)", fab.source)
+        for name, count_name in (("size_x_m", "cd_count_per_m"), ("size_y_m", "md_count_per_m")):
+            size, count = float(getattr(fab, name)), float(getattr(fab, count_name))
+            problem = whole_repeat_problem(size, fab.shed, count, count_name)
+            if problem is not None:
+                raise scene_problem(f"fabric.{name}", problem, size)
+        dom = self.domain
+        if dom is not None:
+            for axis, size in ((0, fab.size_x_m), (1, fab.size_y_m)):
+                if not math.isclose(dom.lo_m[axis], 0.0, abs_tol=1e-12):
+                    raise scene_problem(f"domain.lo_m[{axis}]", "laydown.walls periodic: the periodic "
+                                        "box is the fabric piece, starting at 0", dom.lo_m[axis])
+                if not math.isclose(dom.hi_m[axis], size, rel_tol=1e-9):
+                    raise scene_problem(f"domain.hi_m[{axis}]", "laydown.walls periodic: the periodic "
+                                        f"box is the fabric piece, ending at {size!r} m "
+                                        f"(fabric.{('size_x_m', 'size_y_m')[axis]})", dom.hi_m[axis])
+        f = self.fibers
+        period = min(fab.size_x_m, fab.size_y_m)
+        if f is not None and f.length_m >= period:
+            raise scene_problem("fibers.length_m", "laydown.walls periodic needs fibers shorter than "
+                                f"the periodic box ({period!r} m, the smaller fabric size): the yarns "
+                                "are tiled over one periodic image on each side", f.length_m)
+        return self
+
     @property
     def output_path(self) -> Path:
         """The output folder (relative to the working directory)."""
@@ -110,6 +151,26 @@ class Scene(_Section):
     def to_json(self) -> str:
         """Canonical JSON (sorted keys, defaults filled in) of the whole scene."""
         return json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+
+
+def _fmt_m(v: float) -> str:
+    """A length as ``2.6667e-3`` (up to 5 significant digits, no exponent padding: ``2e-3``)."""
+    mant, exp = f"{v:.4e}".split("e")
+    return f"{mant.rstrip('0').rstrip('.')}e{int(exp)}"
+
+
+def whole_repeat_problem(size_m: float, shed: int, count_per_m: float, count_name: str) -> str | None:
+    """None if ``size_m`` is a whole number (>= 1) of weave repeats of ``shed`` / ``count_per_m``
+    (relative tolerance 1e-6), else the problem with the nearest allowed sizes (m)."""
+    repeat = shed / count_per_m
+    n = size_m / repeat
+    k = round(n)
+    if k >= 1 and abs(n - k) <= 1e-6 * n:
+        return None
+    lo, hi = math.floor(n), math.ceil(n)
+    allowed = " or ".join(_fmt_m(m * repeat) for m in ((lo, hi) if lo >= 1 else (hi,)))
+    return (f"laydown.walls periodic needs whole weave repeats of shed / {count_name} = "
+            f"{_fmt_m(repeat)} m: {allowed} m")
 
 
 SECTIONS: tuple[str, ...] = (

@@ -47,9 +47,10 @@ from ..fiber_io import (
 )
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
-    frame_quaternions, mass_fraction_speed, node_dump_columns, pair_options,
-    product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric, write_sheet_png,
-    write_sheet_vtu, write_yarns, yarn_distances,
+    frame_positions, frame_quaternions, lateral_period, mass_fraction_speed, node_dump_columns,
+    pair_options, periodic_images, position_columns, product_thickness_above_fabric,
+    sheet_thickness, sheet_thickness_above_fabric, tile_yarns, wrap_chains, wrap_points,
+    write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
 )
 from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_file_token
 from ..liggghts_log import read_dump, total_wall_time
@@ -162,9 +163,10 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     # pair_style fiber/dlvo needs newton on; the fiber fixes are indifferent to it
     restart = (file_token(f"{RESTART_STEM}.{int(resume_step)}.{RESTART_EXT}")
                if resume_step is not None else None)
+    periodic = lateral_period(scene) is not None  # walls periodic: boundary p p f, no side planes
     fiber_preamble(s, f, scene.contact is not None,
                    *laydown_beam_options(ld), restart=restart,
-                   flat_decomposition=True)
+                   flat_decomposition=True, periodic_xy=periodic)
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
@@ -185,10 +187,13 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     s.command("variable", "settled", "equal", fix_ref(SETTLE_FIX, 1))
     s.command("thermo_style", "custom", "step", "atoms", fix_ref(REMOVE_FIX, 1), fix_ref(REMOVE_FIX, 2),
               fix_ref(SETTLE_FIX, 1), fix_ref(SETTLE_FIX, 2), fix_ref("drag", 3))
-    s.command("thermo_modify", "lost", "ignore")  # losses are caught by the accounting by fiber ID
+    # losses are caught by the accounting by fiber ID; flush: the log follows the run (a pipe
+    # buffers fiberdem's screen output otherwise)
+    s.command("thermo_modify", "lost", "ignore", "flush", "yes")
     s.command("thermo", steps_per_check)
-    # collapsed fibers: also the node quaternions (their sections' orientation, the gap check)
-    columns, dump_fmt = node_dump_columns(f)
+    # collapsed fibers: also the node quaternions (their sections' orientation, the gap check);
+    # periodic: the unwrapped positions (continuous chains)
+    columns, dump_fmt = node_dump_columns(f, periodic)
     s.command("dump", "traj", "all", "custom", steps_per_check, file_token(TRAJ_NAME), *columns)
     s.command("dump_modify", "traj", "sort", "id", "format", dump_fmt)
     first = 0
@@ -338,6 +343,13 @@ class Laydown(Stage):
                   else (lambda step: True))  # fmt: skip
         resume_step = resume_point(work, hashes, usable) if ctx.options.get("resume") else None
         if resume_step is None:
+            earlier = restart_steps(work) if work.is_dir() else []
+            if earlier and not ctx.options.get("resume"):
+                import sys
+
+                print(f"fiberform laydown: starting over: the restart files of an earlier run in {work} "
+                      f"(steps {earlier[0]}-{earlier[-1]}) are removed; `--resume` continues from them",
+                      file=sys.stderr)
             if work.exists():
                 shutil.rmtree(work)
             work.mkdir(parents=True)
@@ -348,7 +360,7 @@ class Laydown(Stage):
         else:
             prepare_resume(work, resume_step)
             nodes_left(work, paths["fibers_nodes"])
-        write_yarns(work / YARNS_NAME, paths["fabric_h5"])
+        write_yarns(work / YARNS_NAME, paths["fabric_h5"], lateral_period(scene))
         (work / INPUT_NAME).write_text(render_input(scene, self._superficial_velocity(ctx), resume_step))
         if two_way(scene):
             (work / FLUID_LOG).unlink(missing_ok=True)  # the fluid ranks append to it
@@ -379,7 +391,11 @@ class Laydown(Stage):
         work = self.stage_dir(ctx) / "work"
         resume_step = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
         yarns = read_yarns(paths["fabric_h5"])
-        pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
+        # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns had them, with
+        # the nodes (elements: the chains) wrapped into the box
+        period = lateral_period(scene)
+        checked = yarns if period is None else tile_yarns(yarns, period)
+        pts, offs, rad = checked.points, checked.offsets, checked.radius
         with h5py.File(paths["fibers_h5"], "r") as fh:
             f_off = np.asarray(fh["fibers/offsets"][...], dtype=np.int64)
             f_mass = np.asarray(fh["fibers/mass"][...], dtype=float)
@@ -417,12 +433,12 @@ class Laydown(Stage):
         m_nodes = float(last.columns["mass"].sum())  # LIGGGHTS' node masses of the fibers left
         # ---- sheet state, ordered by fiber and node ----
         order = np.lexsort((np.rint(last.columns["f_beam[2]"]), fid))
-        xs = np.stack([last.columns[c][order] for c in ("x", "y", "z")], axis=1)
+        xs = np.stack([last.columns[c][order] for c in position_columns(last.columns)], axis=1)
         vs = np.stack([last.columns[c][order] for c in ("vx", "vy", "vz")], axis=1)
         fid_s = fid[order]
         counts = np.array([int(np.sum(fid_s == k)) for k in present], dtype=np.int64)
         offsets = np.concatenate([[0], np.cumsum(counts)])
-        gaps = yarn_distances(xs, pts, offs, rad) if len(xs) else np.zeros(0)
+        gaps = yarn_distances(wrap_points(xs, period), pts, offs, rad) if len(xs) else np.zeros(0)
         fabric_top = yarns.top
         thickness = sheet_thickness(xs[:, 2], f.width_m) if len(xs) else 0.0
         above = sheet_thickness_above_fabric(scene, xs, offsets, present, fabric_top)
@@ -444,8 +460,12 @@ class Laydown(Stage):
                       "IDs of the removed fibers")
         write_dataset(a, "sheet_node_mass", m_nodes, "kg",
                       "sum of LIGGGHTS node masses left (cross-check of sheet_mass)")
-        clearances = np.array([element_clearance(*frame_fibers(fr.columns)[::2], pts, offs, rad)
-                               if len(fr.ids) else math.inf for fr in frames])
+
+        def frame_clearance(columns: Mapping[str, Any]) -> float:
+            x, _, offsets = frame_fibers(columns)
+            return element_clearance(wrap_chains(x, offsets, period), offsets, pts, offs, rad)
+
+        clearances = np.array([frame_clearance(fr.columns) if len(fr.ids) else math.inf for fr in frames])
         # sections of every generated node: outer half-axes (a1 != a2: a collapsed fiber's
         # rectangle, oriented by the dumped node quaternions) and the circles' radius
         node_axes = f_radii[:, :2]
@@ -458,7 +478,7 @@ class Laydown(Stage):
             if q is None and f.cross_section != "circular":
                 raise StageError(f"{work / TRAJ_NAME}: no node quaternions (f_beam[4..7]) for the "
                                  "collapsed fibers' sections: run the lay-down again")
-            return fiber_fiber_gap(x, offsets, node_r[sel], node_axes[sel], q)
+            return fiber_fiber_gap(x, offsets, node_r[sel], node_axes[sel], q, period)
 
         fiber_gaps = np.array([frame_gap(fr.columns) if len(fr.ids) else math.inf for fr in frames])
         # the report's pass-through tolerance: 5 % of the nominal radius, or of a collapsed
@@ -492,6 +512,7 @@ class Laydown(Stage):
             "fiber_contact": ("pair_style fiber/dlvo " + " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode))
                               if scene.contact is not None else "none"),
             "walls": ld.walls,
+            "lateral_period_m": np.array(period if period is not None else (0.0, 0.0), dtype=np.float64),
             "ranks": ld.ranks,
             "resumed_from_step": -1 if resume_step is None else int(resume_step),
         })
@@ -499,7 +520,7 @@ class Laydown(Stage):
         write_dataset(snap, "step", np.array([fr.step for fr in frames], dtype=np.int64), "1",
                       "steps of the snapshots (every check)")
         write_dataset(snap, "min_yarn_gap", np.array([
-            float(yarn_distances(np.stack([fr.columns[c] for c in ("x", "y", "z")], 1)[::1], pts, offs, rad).min())
+            float(yarn_distances(wrap_points(frame_positions(fr.columns), period), pts, offs, rad).min())
             if len(fr.ids) else math.inf for fr in frames]), "m",
             "smallest node-to-yarn gap (distance to centreline - yarn radius) per snapshot")
         write_dataset(snap, "min_element_clearance", clearances, "m",
@@ -548,9 +569,13 @@ class Laydown(Stage):
             raise StageError(f"{final}: fiberdem wrote no final restart file (see work/{LOG_NAME})")
         h5["run"].attrs["sheet_restart_sha256"] = file_hash(final)
         shutil.copyfile(final, tmp[SHEET_RESTART])
-        write_sheet_png(tmp[PNG_NAME], xs, offsets, pts, offs, rad,
+        # periodic: every image of a fiber that reaches into the box, on the fabric's own yarns
+        x_png, off_png, of_png = xs, offsets, None
+        if period is not None:
+            x_png, off_png, of_png, _ = periodic_images(xs, offsets, period)
+        write_sheet_png(tmp[PNG_NAME], x_png, off_png, yarns.points, yarns.offsets, yarns.radius,
                    f"{scene.name}: {len(present)} fibers on the fabric after "
-                   f"{steps_done * ld.timestep_s * 1e3:.2f} ms", (dom.lo_m, dom.hi_m))
+                   f"{steps_done * ld.timestep_s * 1e3:.2f} ms", (dom.lo_m, dom.hi_m), colour_of=of_png)
         lines = [
             f"# Lay-down: scene `{scene.name}`", "",
             f"- fibers injected: {n_fib} ({m_inj:.6g} kg); initial heights "
@@ -587,6 +612,10 @@ class Laydown(Stage):
             f"{'circles' if circular else 'the rectangles 2 a1 x 2 a2 of the collapsed fibers'}) "
             f"over all snapshots: {fiber_gaps.min() * 1e9:.1f} nm "
             f"({f'OK, no overlap beyond 5 % of {overlap_of}' if fiber_gaps.min() > -overlap_tol else 'VIOLATED'})",
+            *([f"- lateral boundaries: periodic in x and y with periods {period[0] * 1e3:.4g} x "
+               f"{period[1] * 1e3:.4g} mm (the fabric piece, whole weave repeats; yarns tiled over "
+               f"the neighbouring images; positions above are unwrapped, `/run` lateral_period_m)"]
+              if period is not None else []),
             f"- fiberdem wall time: {wall:.1f} s on {ld.ranks} rank(s)"
             + (f" (this part: resumed from the restart file of step {resume_step})"
                if resume_step is not None else ""), "",
@@ -795,9 +824,10 @@ def approximations(scene: Scene) -> list[str]:
          ld.stiffness_scale == 1.0 else ""),
         "drag per element at its centre",
         "yarn contact per fiber element (closest points of the element's and the yarn segment's "
-        "centre lines, force split to the two nodes by the lever rule), side-plane contact per "
-        + ("node" if ld.yarn_contact_mode == "newton"
-           else "contact point of the elements (fix wall/fiber/dlvo)")
+        "centre lines, force split to the two nodes by the lever rule), "
+        + ("no side planes (periodic x and y)" if ld.walls == "periodic" else
+           "side-plane contact per " + ("node" if ld.yarn_contact_mode == "newton"
+                                        else "contact point of the elements (fix wall/fiber/dlvo)"))
         + ("; sections: circles, or the rectangles 2 a1 x 2 a2 of collapsed fibers at their extent "
            "along the contact normal; " if ld.yarn_contact_mode == "newton" else "; radius max(a1, a2); ")
         + ("the law acts inside each fiber's implicit Newton solve at the end-of-step state "
@@ -827,6 +857,11 @@ def approximations(scene: Scene) -> list[str]:
                     "lines to the surfaces); no self-contact; "
                     if newton else " (points 'auto' unless given; ") +
                    "steric parameters: the style's defaults, docs/models/contact.md)")
+    if ld.walls == "periodic":
+        out.append("lateral boundaries periodic in x and y (the fabric piece of whole weave repeats; "
+                   "yarns tiled over the neighbouring images); the frozen flow is the flow stage's "
+                   "(symmetry sides), sampled at the element centre mapped into the box, so it is "
+                   "not periodic at the box sides")
     if ld.walls == "wall_fiber_dlvo":
         out.append("side walls: fix wall/fiber/dlvo (contact developers' fix)")
     elif ld.walls == "wall_gran":

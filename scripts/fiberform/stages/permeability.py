@@ -63,6 +63,7 @@ from ..products import (
     FABRIC_H5, FIBERS_H5, LAYDOWN_H5, PRESS_H5, Chain, read_fabric_image, read_sheet_chains,
     read_yarn_chains,
 )  # fmt: skip
+from ..fiber_sheet import lateral_period, periodic_images
 from ..provenance import write_dataset
 from ..scene import PermeabilitySection, Scene
 from ._stage import Program, Stage, StageContext, resumes
@@ -70,7 +71,8 @@ from ._stage import Program, Stage, StageContext, resumes
 __all__ = [
     "Forchheimer", "PermeabilityGeometry", "PermeabilityStage", "case_setup",
     "darcy_permeability", "fiber_resistance", "forchheimer_setup", "law_radius",
-    "nominal_fiber_section", "nominal_fiber_thickness", "solid_fraction", "zone_layers",
+    "nominal_fiber_section", "nominal_fiber_thickness", "periodic_chains", "solid_fraction",
+    "zone_layers",
 ]
 
 H5_NAME, REPORT_NAME, PNG_NAME = "permeability.h5", "report.md", "permeability.png"
@@ -119,6 +121,20 @@ def nominal_fiber_section(scene: Scene) -> tuple[float, float]:
 def nominal_fiber_thickness(scene: Scene) -> float:
     """The thinnest dimension [m] of the scene's fiber section (:func:`nominal_fiber_section`)."""
     return nominal_fiber_section(scene)[1]
+
+
+def periodic_chains(chains: list[Chain], period: tuple[float, float]) -> list[Chain]:
+    """The fiber chains of a periodic lay-down (``laydown.walls: periodic``: unwrapped, up to a
+    fiber length out of the piece) with their images shifted by whole periods (Lx, Ly), m, that
+    reach into the piece (fiber_sheet.periodic_images, margin: the chain's half-width): the
+    volume-fraction fields clip chains to the piece, so a fiber across a side enters on both sides
+    and no fiber volume is lost or counted twice."""
+    out: list[Chain] = []
+    for c in chains:
+        x, offs, _, _ = periodic_images(c.points, np.array([0, len(c.points)]), period, margin=c.radius)
+        out.extend(Chain(x[lo:hi].copy(), c.radius, c.half_thickness)
+                   for lo, hi in zip(offs[:-1], offs[1:]))
+    return out
 
 
 def law_radius(c: Chain) -> float:
@@ -318,6 +334,9 @@ class PermeabilityStage(Stage):
         section = ctx.scene.fibers.cross_section if ctx.scene.fibers is not None else "circular"
         fibers = (read_sheet_chains(paths["sheet_h5"], paths["fibers_h5"], section)
                   if "sheet_h5" in paths else [])  # fmt: skip
+        period = lateral_period(ctx.scene)
+        if period is not None and fibers:
+            fibers = periodic_chains(fibers, period)
         up = img.upper
         top = float(up[2])
         for c in fibers:  # a flat element's top lies half a thickness above its axis (at most)

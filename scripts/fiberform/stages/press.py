@@ -40,9 +40,10 @@ from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, laydown_beam_options, write_nodes_subset
 from ..fiber_sheet import (
     YARNS_FIX, Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
-    frame_fibers, frame_quaternions, node_dump_columns, node_extents, product_thickness_above_fabric,
-    sheet_thickness, sheet_thickness_above_fabric, solid_fraction_profile, static_force_refs,
-    write_sheet_png, write_sheet_vtu, write_yarns,
+    frame_fibers, frame_quaternions, lateral_period, node_dump_columns, node_extents, periodic_images,
+    product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric,
+    solid_fraction_profile, static_force_refs, tile_yarns, wrap_chains, write_sheet_png,
+    write_sheet_vtu, write_yarns,
 )
 from ..inputs import (
     LiggghtsInput, Token, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
@@ -191,10 +192,11 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     if pair:
         s.command("variable", "ovl_pair", "equal", fix_ref("FIBER_DLVO_STEP", 6, negate=True))
     # collapsed fibers: also the node quaternions (their sections' orientation, the overlaps)
-    columns, dump_fmt = node_dump_columns(f)
+    # periodic x/y (laydown.walls periodic; boundary p p f from the restart): unwrapped positions
+    columns, dump_fmt = node_dump_columns(f, lateral_period(scene) is not None)
     s.command("dump", "traj", "all", "custom", p.every, file_token(TRAJ_NAME), *columns)
     s.command("dump_modify", "traj", "sort", "id", "format", dump_fmt)
-    s.command("thermo_modify", "lost", "ignore")
+    s.command("thermo_modify", "lost", "ignore", "flush", "yes")  # flush: the log follows the run
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
     plate_words: list[object] = ["terms", ident_list(ld.terms)] + (
         ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
@@ -405,7 +407,7 @@ class Press(Stage):
         # the fibers left on the sheet (the lay-down may have removed some)
         write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
                            read_sheet(up["laydown_h5"]).fiber_id.tolist())
-        write_yarns(work / YARNS_NAME, up["fabric_h5"])
+        write_yarns(work / YARNS_NAME, up["fabric_h5"], lateral_period(scene))
         (work / INPUT_NAME).write_text(build_input(scene, p))
 
     def programs(self, ctx: StageContext) -> list[Program]:
@@ -455,7 +457,11 @@ class Press(Stage):
         scene = ctx.scene
         pr, dom, f = scene.press, scene.domain, scene.fibers
         assert pr is not None and dom is not None and f is not None
-        pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
+        # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns has them, with
+        # each chain shifted so its first node lies in the box, fiber pairs by closest images
+        period = lateral_period(scene)
+        checked = yarns if period is None else tile_yarns(yarns, period)
+        pts, offs, rad = checked.points, checked.offsets, checked.radius
         rows = np.array(thermo_rows(log_text), dtype=float)
         if rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
             raise StageError(f"{work / LOG_NAME}: no thermo table of {len(COLUMNS)} columns")
@@ -514,11 +520,12 @@ class Press(Stage):
                 raise StageError(f"{work / TRAJ_NAME}: no node quaternions (f_beam[4..7]) for the "
                                  "collapsed fibers' sections: run the press again")
             # sections: circles, or the collapsed fibers' rectangles (as the lay-down's gaps)
-            ovl_fiber.append(max(0.0, -fiber_fiber_gap(x, offsets, r, axes[key], q)) / p.t_min)
+            ovl_fiber.append(max(0.0, -fiber_fiber_gap(x, offsets, r, axes[key], q, period)) / p.t_min)
             # yarns: from the centre lines, less the thinner half-axis (circles: the radius; a
             # collapsed fiber's rectangle reaches at least that far); plate: each node's extent
             # upwards (a rectangle's in its frame, as fix wall/fiber/dlvo's plane contact)
-            clear = element_clearance(x, offsets, pts, offs, rad) - float(np.min(axes[key], axis=1).max())
+            clear = (element_clearance(wrap_chains(x, offsets, period), offsets, pts, offs, rad)
+                     - float(np.min(axes[key], axis=1).max()))
             ovl_yarn.append(max(0.0, -clear) / p.t_min)
             up_ext = r if q is None else node_extents(axes[key], q, np.array([0.0, 0.0, 1.0]))
             ovl_plate.append(max(0.0, float(np.max(x[:, 2] + up_ext - plate_z[k]))) / p.t_min)
@@ -610,9 +617,14 @@ class Press(Stage):
         shutil.copyfile(final, tmp[RESTART_NAME])
 
         write_sheet_vtu(tmp[VTU_NAME], x_last, fid_last, off_last)
-        write_sheet_png(tmp[PNG_NAME], x_last, off_last, pts, offs, rad,
+        # periodic: every image of a fiber that reaches into the box, on the fabric's own yarns
+        x_png, off_png, of_png = x_last, off_last, None
+        if period is not None:
+            x_png, off_png, of_png, _ = periodic_images(x_last, off_last, period)
+        write_sheet_png(tmp[PNG_NAME], x_png, off_png, yarns.points, yarns.offsets, yarns.radius,
                         f"{scene.name}: pressed sheet ({pr.mode} mode), plate at "
-                        f"{plate_z[-1] * 1e3:.4f} mm", (dom.lo_m, dom.hi_m), plate_z=float(plate_z[-1]))
+                        f"{plate_z[-1] * 1e3:.4f} mm", (dom.lo_m, dom.hi_m), plate_z=float(plate_z[-1]),
+                        colour_of=of_png)
         _write_curve(tmp[CURVE_NAME], thick_plate, np.array(span), pressure, phase,
                      f"{scene.name}: pressure vs thickness ({pr.mode} mode)")
         summary = _summary(pr, t, pressure, thick_plate, np.array(span), np.array(phi_thick),
