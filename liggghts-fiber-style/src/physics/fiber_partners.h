@@ -83,37 +83,43 @@ class FiberPartners {
     seg_.clear();
     pairs_.clear();
     by_cluster_.clear();
-    double lmax = 0.0, rmax = 0.0, ext = 0.0;
+    double lmax = 0.0, rmax = 0.0;
     for (const Fiber &f : fibers_) {
-      double len = 0.0;
       for (std::size_t k = 0; k < f.pts.size(); ++k) {
         rmax = std::max(rmax, f.pts[k].radius);
-        if (k + 1 < f.pts.size()) {
-          const double l = norm(f.pts[k + 1].x - f.pts[k].x);
-          lmax = std::max(lmax, l);
-          len += l;
-        }
+        if (k + 1 < f.pts.size()) lmax = std::max(lmax, norm(f.pts[k + 1].x - f.pts[k].x));
       }
-      ext = std::max(ext, len);
     }
     const double reach = lmax + 2.0 * rmax + margin;
-    const double pad = ext + reach;  // a fiber unwrapped from its first node reaches ext out of the box
-    const int nim[3] = {period_.x > 0 ? 1 : 0, period_.y > 0 ? 1 : 0, period_.z > 0 ? 1 : 0};
+    // Periodic axes: every element is binned at the image whose midpoint lies in the box (shift w),
+    // plus the images across a side when that midpoint is within `reach` of it; each element is
+    // then queried at its own in-box image. Two elements within the margin have midpoints within
+    // `reach` of each other, so the image of the other next to the queried one is binned: the
+    // pairs are complete with about (1 + 4 reach / L) copies per element instead of nine.
+    const double per[3] = {period_.x, period_.y, period_.z};
+    auto in_box_shift = [&](Vec3 m) {
+      Vec3 w{};
+      for (int c = 0; c < 3; ++c)
+        if (per[c] > 0.0) w[c] = -std::floor((m[c] - lo[c]) / per[c]) * per[c];
+      return w;
+    };
     for (int fi = 0; fi < static_cast<int>(fibers_.size()); ++fi) {
       const Fiber &f = fibers_[static_cast<std::size_t>(fi)];
       for (int k = 0; k + 1 < static_cast<int>(f.pts.size()); ++k) {
         const Vec3 a = f.pts[static_cast<std::size_t>(k)].x, b = f.pts[static_cast<std::size_t>(k + 1)].x;
         const double r = std::max(f.pts[static_cast<std::size_t>(k)].radius, f.pts[static_cast<std::size_t>(k + 1)].radius);
-        for (int ix = -nim[0]; ix <= nim[0]; ++ix)
-          for (int iy = -nim[1]; iy <= nim[1]; ++iy)
-            for (int iz = -nim[2]; iz <= nim[2]; ++iz) {
-              const Vec3 sh{ix * period_.x, iy * period_.y, iz * period_.z};
-              const Vec3 xa = a + sh, xb = b + sh;
-              bool inside = true;
-              for (int c = 0; c < 3; ++c)
-                if (std::max(xa[c], xb[c]) < lo[c] - pad || std::min(xa[c], xb[c]) > hi[c] + pad) inside = false;
-              if (!inside) continue;
-              bodies_.add_segment(xa, xb, r, fi);
+        const Vec3 w = in_box_shift(0.5 * (a + b));
+        const Vec3 m = 0.5 * (a + b) + w;
+        int lo_im[3], hi_im[3];
+        for (int c = 0; c < 3; ++c) {
+          lo_im[c] = (per[c] > 0.0 && hi[c] - m[c] < reach) ? -1 : 0;  // its image below the lower side
+          hi_im[c] = (per[c] > 0.0 && m[c] - lo[c] < reach) ? 1 : 0;   // its image above the upper side
+        }
+        for (int ix = lo_im[0]; ix <= hi_im[0]; ++ix)
+          for (int iy = lo_im[1]; iy <= hi_im[1]; ++iy)
+            for (int iz = lo_im[2]; iz <= hi_im[2]; ++iz) {
+              const Vec3 sh = w + Vec3{ix * per[0], iy * per[1], iz * per[2]};
+              bodies_.add_segment(a + sh, b + sh, r, fi);
               seg_.push_back({fi, k, sh});
             }
       }
@@ -129,12 +135,13 @@ class FiberPartners {
       for (int k = 0; k + 1 < static_cast<int>(f.pts.size()); ++k) {
         const Point &p = f.pts[static_cast<std::size_t>(k)], &q = f.pts[static_cast<std::size_t>(k + 1)];
         hits.clear();
-        bodies_.element_segment_hits(p.x, q.x, std::max(p.radius, q.radius), margin, fa, hits);
+        const Vec3 w = in_box_shift(0.5 * (p.x + q.x));  // the element at its in-box image
+        bodies_.element_segment_hits(p.x + w, q.x + w, std::max(p.radius, q.radius), margin, fa, hits);
         for (const BodyHit &g : hits) {
           const SegRef &sr = seg_[static_cast<std::size_t>(g.seg)];
           if (fibers_[static_cast<std::size_t>(sr.fiber)].id < f.id) continue;
           min_gap_ = std::min(min_gap_, g.h);
-          pairs_.push_back({fa, k, sr.fiber, sr.k, sr.shift});
+          pairs_.push_back({fa, k, sr.fiber, sr.k, sr.shift - w});  // b's shift in a's frame
           unite(fa, sr.fiber);
         }
       }

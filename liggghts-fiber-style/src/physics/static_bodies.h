@@ -156,7 +156,7 @@ class StaticBodies {
 
   void clear_segments() {
     segs_.clear();
-    bins_.clear();
+    reset_bins();
     bins_valid_ = false;
   }
   void add_segment(Vec3 a, Vec3 b, double radius, int yarn) {
@@ -187,7 +187,7 @@ class StaticBodies {
   // every segment whose surface is within `reach` of it.
   void build_bins(double reach) {
     reach_ = std::max(reach, reach_);
-    bins_.clear();
+    reset_bins();
     bins_valid_ = true;
     if (segs_.empty()) return;
     double rmax = 0.0, lmax = 0.0;
@@ -209,7 +209,11 @@ class StaticBodies {
       }
       for (int a = lo[0]; a <= hi[0]; ++a)
         for (int b = lo[1]; b <= hi[1]; ++b)
-          for (int c = lo[2]; c <= hi[2]; ++c) bins_[key(a, b, c)].push_back(id);
+          for (int c = lo[2]; c <= hi[2]; ++c) {
+            std::vector<int> &bin = bins_[key(a, b, c)];
+            if (bin.empty()) ++bins_used_;
+            bin.push_back(id);
+          }
     }
   }
   double reach() const { return reach_; }
@@ -270,6 +274,16 @@ class StaticBodies {
   double plane_gap(int k, Vec3 x, double r) const { return dot(x - planes_[k].p, planes_[k].n) - r; }
 
  private:
+  // Empties the bins but keeps their storage (fix fiber/dlvo/step rebuilds the fiber bins every
+  // step: no allocation then); bins left empty for long are dropped when they outnumber the used.
+  void reset_bins() {
+    if (bins_.size() > 2 * bins_used_ + 1024) {
+      bins_.clear();
+    } else {
+      for (auto &kv : bins_) kv.second.clear();
+    }
+    bins_used_ = 0;
+  }
   static long key(int ix, int iy, int iz) { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
   const std::vector<int> *lookup(Vec3 p) const {
     if (segs_.empty() || !bins_valid_) return nullptr;
@@ -299,6 +313,7 @@ class StaticBodies {
   std::unordered_map<long, std::vector<int>> bins_;
   mutable std::vector<BodyHit> scratch_;  // element_hits
   bool bins_valid_ = false;
+  std::size_t bins_used_ = 0;  // non-empty bins of the last build
   double size_ = 1.0, lo_[3] = {0, 0, 0}, reach_ = 0.0;
 };
 
