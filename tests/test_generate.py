@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 from scipy.spatial import cKDTree
 
-from fiberform.fiber_io import quat_to_frames
+from fiberform.fiber_io import Fiber, quat_to_frames
 from fiberform.stages.generate import (
     FiberShape,
     Sampler,
@@ -233,3 +233,44 @@ def test_cli_generate_then_fiberdem_loads(tmp_path: Path, build_dir: Path,
     # second run is up to date
     p2 = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, errors="replace", timeout=600)
     assert p2.returncode == 0 and "up to date" in p2.stdout
+
+
+def test_periodic_placement_covers_the_sides_without_intersections() -> None:
+    """laydown.walls periodic (period = the placement box in x and y): the fibers' bounding-box
+    centres are uniform over the box, so the node mass in a band along the sides equals the band's
+    area share (inside-the-box placement, the default, leaves that band at a fraction: fibers of
+    half the box length cannot have their middle near a side); fibers cross the sides; and no two
+    fibers intersect, periodic images included (checked here with segments_intersect on the 9
+    images)."""
+    from fiberform.stages.generate import segments_intersect
+
+    L, band = 1.0e-3, 0.15e-3
+    kw = dict(box_lo=np.array([0.0, 0.0, 0.0]), box_hi=np.array([L, L, 0.5e-3]), density=RHO,
+              length=Sampler({"kind": "fixed", "value": 0.5e-3}),
+              width=Sampler({"kind": "fixed", "value": 20e-6}),
+              curvature=Sampler({"kind": "fixed", "value": 1.0}), segments=5, count=120)
+
+    def band_share(sets: list) -> float:
+        x = np.vstack([g.fiber.x for fibers in sets for g in fibers])
+        x[:, :2] = np.mod(x[:, :2], L)
+        edge = (x[:, 0] < band) | (x[:, 0] > L - band) | (x[:, 1] < band) | (x[:, 1] > L - band)
+        return float(np.mean(edge))
+
+    area_share = 1.0 - (1.0 - 2 * band / L) ** 2  # 0.51
+    seeds = (4, 5, 6)
+    inside = [generate_fibers(rng=np.random.default_rng(s), **kw) for s in seeds]
+    sets = [generate_fibers(rng=np.random.default_rng(s), period=(L, L), **kw) for s in seeds]
+    assert band_share(inside) < 0.85 * area_share  # measured 0.394
+    assert band_share(sets) == pytest.approx(area_share, abs=0.035)  # measured 0.514
+    periodic = sets[0]
+    crossing = [g for g in periodic if np.any(g.fiber.x[:, :2] < 0.0) or np.any(g.fiber.x[:, :2] > L)]
+    assert len(crossing) > 25
+    for i, a in enumerate(periodic):
+        for b in periodic[i + 1:]:
+            for dx in (-L, 0.0, L):
+                for dy in (-L, 0.0, L):
+                    if abs(a.fiber.x[0, 0] - b.fiber.x[0, 0] - dx) > 1.2e-3 or \
+                            abs(a.fiber.x[0, 1] - b.fiber.x[0, 1] - dy) > 1.2e-3:
+                        continue  # too far apart to touch (0.5 mm fibers)
+                    img = Fiber(x=b.fiber.x + np.array([dx, dy, 0.0]), q=b.fiber.q, radii=b.fiber.radii)
+                    assert not segments_intersect(a.fiber, img)
