@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -356,6 +357,20 @@ def test_periodic_input_has_no_side_planes_and_tiled_yarns(periodic_run: Path) -
     with h5py.File(periodic_run / "runs/a/fabric/fabric.h5", "r") as h:
         n_own = len(h["yarns/radius"])
     assert len(ids) == 3 * n_own == 36  # the 12 yarns of the piece, 3 chains each
+
+
+@pytest.mark.system
+def test_periodic_ghost_reach_is_set_by_the_elements_not_the_box(periodic_run: Path) -> None:
+    """Fibers cross the sides at step 0: the longest element, which sets the contact styles'
+    neighbour and ghost reach at init (before any ghost image exists), must be measured by the
+    minimum image. Measured with the closest local copy instead, an element across a side looked
+    a box length long: 2035 ghosts for 65 atoms here, and a neighbour-list overflow on the
+    case-A piece (session 17). The ghosts of the run stay a fraction of a box's worth."""
+    log = (periodic_run / "runs/a/laydown/work/log.fiberdem").read_text()
+    local = [float(v) for v in re.findall(r"^Nlocal:\s+(\S+)", log, re.M)]
+    ghost = [float(v) for v in re.findall(r"^Nghost:\s+(\S+)", log, re.M)]
+    assert local and len(ghost) == len(local)
+    assert max(g / n for g, n in zip(ghost, local)) < 2.0, (ghost[:3], local[:3])
 
 
 @pytest.mark.system

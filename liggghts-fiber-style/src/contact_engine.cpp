@@ -88,7 +88,8 @@ void ContactEngine::global_extents(double &max_len, double &max_rad) const {
     loc[1] = std::max(loc[1], atom->radius[i]);
     const int j = next_node(i);
     if (j < 0) continue;
-    const double d[3] = {x[j][0] - x[i][0], x[j][1] - x[i][1], x[j][2] - x[i][2]};
+    double d[3] = {x[j][0] - x[i][0], x[j][1] - x[i][1], x[j][2] - x[i][2]};
+    domain->minimum_image(d);  // periodic x/y before the first ghosts exist (init): j may be the far image
     loc[0] = std::max(loc[0], vlen(d));
   }
   MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, world);

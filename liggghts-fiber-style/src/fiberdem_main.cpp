@@ -66,6 +66,9 @@ extern "C" int MPI_Finalize() {
 }
 
 int main(int argc, char **argv) {
+  // Line-buffered screen output: LIGGGHTS prints its errors to the screen and aborts without a
+  // flush, so through a pipe or into a file (the stages' logs) a block-buffered stdout lost them.
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
   MPI_Init(&argc, &argv);
   // First collective on MPI_COMM_WORLD: split by MPI_APPNUM (a coupled MPMD run with
   // fiberPimpleFoam -coupled, docs/coupling/launch.md); alone, `local` holds every rank of the world.

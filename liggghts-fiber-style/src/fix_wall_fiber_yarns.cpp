@@ -136,9 +136,10 @@ void FixWallFiberYarns::init() {
     if (beam_->node_index(i) + 1 < beam_->node_count(i)) {
       int j = atom->map(atom->tag[i] + 1);
       if (j >= 0) {
-        j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
+        double d[3] = {atom->x[j][0] - atom->x[i][0], atom->x[j][1] - atom->x[i][1], atom->x[j][2] - atom->x[i][2]};
+        domain->minimum_image(d);  // periodic x/y: at init no ghost image may exist yet
         double l2 = 0.0;
-        for (int k = 0; k < 3; ++k) l2 += (atom->x[j][k] - atom->x[i][k]) * (atom->x[j][k] - atom->x[i][k]);
+        for (int k = 0; k < 3; ++k) l2 += d[k] * d[k];
         loc[1] = std::max(loc[1], std::sqrt(l2));
       }
     }
