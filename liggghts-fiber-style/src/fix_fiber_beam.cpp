@@ -471,6 +471,8 @@ static int neighbour_node(LAMMPS *lmp, int i, int dtag) {
   return lmp->domain->closest_image(i, j);
 }
 
+int FixFiberBeam::neighbour(int i, int dtag) const { return neighbour_node(lmp, i, dtag); }
+
 static void missing_neighbour(LAMMPS *lmp, int i, int dtag) {
   static char buf[512];  // static POD: LIGGGHTS' Error prints the message again at exit
   std::snprintf(buf, sizeof buf,

@@ -74,6 +74,9 @@ class FixFiberBeam : public Fix {
 
   // ---- public accessors (atom index i: owned or ghost) ----
   bool is_node(int i) const { return node_[i][FID] >= 0.0; }
+  // The node dtag places along the fiber from local atom i (+1 the next, -1 the previous), as
+  // the local copy closest to i (periodic boxes: the image next to it); -1 if none is here.
+  int neighbour(int i, int dtag) const;
   int fiber_id(int i) const { return static_cast<int>(node_[i][FID]); }
   int node_index(int i) const { return static_cast<int>(node_[i][IDX]); }
   int node_count(int i) const { return static_cast<int>(node_[i][CNT]); }

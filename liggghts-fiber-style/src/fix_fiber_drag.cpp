@@ -166,8 +166,7 @@ void FixFiberDrag::post_force(int) {
     // no reverse communication, and both halves are bit-identical
     for (int side = 0; side < 2; ++side) {
       if ((side == 0 && idx == 0) || (side == 1 && idx == cnt - 1)) continue;
-      int j = atom->map(atom->tag[i] + (side == 0 ? -1 : 1));
-      if (j >= 0) j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
+      const int j = beam_->neighbour(i, side == 0 ? -1 : 1);  // periodic x/y: the image next to node i
       if (j < 0)
         fiberform::fail_one(lmp, FLERR, "fix fiber/drag: the neighbour node of an element is not on this rank or was lost (a node left the box: check the boundary and the lost-atoms warning), or the ghost cut-off is too short");
       double fe[3], je[6];

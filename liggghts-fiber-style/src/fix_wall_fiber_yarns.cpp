@@ -134,7 +134,7 @@ void FixWallFiberYarns::init() {
     beam_->section_radii(i, rr);
     loc[0] = std::max(loc[0], std::max(rr[0], rr[1]));
     if (beam_->node_index(i) + 1 < beam_->node_count(i)) {
-      int j = atom->map(atom->tag[i] + 1);
+      const int j = beam_->neighbour(i, +1);
       if (j >= 0) {
         double d[3] = {atom->x[j][0] - atom->x[i][0], atom->x[j][1] - atom->x[i][1], atom->x[j][2] - atom->x[i][2]};
         domain->minimum_image(d);  // periodic x/y: at init no ghost image may exist yet
@@ -352,9 +352,8 @@ void FixWallFiberYarns::scan_contacts() {
     int nh = 0;
     if (beam_->node_count(i) > 1) {
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
-      int j = atom->map(atom->tag[i] + 1);
+      const int j = beam_->neighbour(i, +1);  // periodic x/y: the image next to node i
       if (j < 0) continue;  // not present here (fix fiber/beam's ghost cut-off covers an element)
-      j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
       const phys::rod::Node b = section(j);
       const double r = phys::element_reach(a, b);
       nh = bodies_.element_hits(a.x, b.x, r, law().h_cut + r, hits);
@@ -399,8 +398,7 @@ void FixWallFiberYarns::post_force(int) {
     if (beam_->node_count(i) > 1) {
       // element to the next node (owned by this node); a fiber's elements cover its nodes
       if (beam_->node_index(i) + 1 >= beam_->node_count(i)) continue;
-      int j = atom->map(atom->tag[i] + 1);
-      if (j >= 0) j = domain->closest_image(i, j);  // periodic x/y: the image next to node i
+      const int j = beam_->neighbour(i, +1);  // periodic x/y: the image next to node i
       if (j < 0 || j >= nlocal)
         fiberform::fail_one(lmp, FLERR, "fix wall/fiber/yarns: the next node of an element is not owned by this "
                           "rank (implicit_force impulse|position runs the element contact on one rank only and "

@@ -637,11 +637,14 @@ def write_sheet_vtu(path: Path, x: Array, fiber: Array, offsets: Array) -> None:
 
 def write_sheet_png(path: Path, x: Array, offsets: npt.NDArray[Any], pts: Array, offs: Array, rad: Array,
                     title: str, box: tuple[list[float], list[float]], plate_z: float | None = None,
-                    colour_of: Sequence[int] | npt.NDArray[np.int64] | None = None) -> None:
+                    period: Sequence[float] | None = None) -> None:
     """Side (x-z) and top (x-y) views of the sheet on the fabric (yarns in grey); ``plate_z``: a
-    press plate's height, drawn dashed in the side view; ``colour_of``: the colour index of each
-    chain (default: its position; periodic images of one fiber share their fiber's,
-    :func:`periodic_images`). Both views clip at the box's x (and y) range."""
+    press plate's height, drawn dashed in the side view; ``period`` (Lx, Ly), m (periodic x/y,
+    unwrapped chains): every image of a fiber that reaches into the box is drawn, in its fiber's
+    colour (:func:`periodic_images`). Both views clip at the box's x (and y) range."""
+    colour_of = None
+    if period is not None:
+        x, offsets, colour_of, _ = periodic_images(x, offsets, period)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -48,7 +48,7 @@ from ..fiber_io import (
 from ..fiber_sheet import (
     contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
     frame_positions, frame_quaternions, lateral_period, mass_fraction_speed, node_dump_columns,
-    pair_options, periodic_images, position_columns, product_thickness_above_fabric,
+    pair_options, product_thickness_above_fabric,
     sheet_thickness, sheet_thickness_above_fabric, tile_yarns, wrap_chains, wrap_points,
     write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
 )
@@ -433,7 +433,7 @@ class Laydown(Stage):
         m_nodes = float(last.columns["mass"].sum())  # LIGGGHTS' node masses of the fibers left
         # ---- sheet state, ordered by fiber and node ----
         order = np.lexsort((np.rint(last.columns["f_beam[2]"]), fid))
-        xs = np.stack([last.columns[c][order] for c in position_columns(last.columns)], axis=1)
+        xs = frame_positions(last.columns)[order]
         vs = np.stack([last.columns[c][order] for c in ("vx", "vy", "vz")], axis=1)
         fid_s = fid[order]
         counts = np.array([int(np.sum(fid_s == k)) for k in present], dtype=np.int64)
@@ -569,13 +569,10 @@ class Laydown(Stage):
             raise StageError(f"{final}: fiberdem wrote no final restart file (see work/{LOG_NAME})")
         h5["run"].attrs["sheet_restart_sha256"] = file_hash(final)
         shutil.copyfile(final, tmp[SHEET_RESTART])
-        # periodic: every image of a fiber that reaches into the box, on the fabric's own yarns
-        x_png, off_png, of_png = xs, offsets, None
-        if period is not None:
-            x_png, off_png, of_png, _ = periodic_images(xs, offsets, period)
-        write_sheet_png(tmp[PNG_NAME], x_png, off_png, yarns.points, yarns.offsets, yarns.radius,
+        # on the fabric's own yarns (periodic: every image of a fiber that reaches into the box)
+        write_sheet_png(tmp[PNG_NAME], xs, offsets, yarns.points, yarns.offsets, yarns.radius,
                    f"{scene.name}: {len(present)} fibers on the fabric after "
-                   f"{steps_done * ld.timestep_s * 1e3:.2f} ms", (dom.lo_m, dom.hi_m), colour_of=of_png)
+                   f"{steps_done * ld.timestep_s * 1e3:.2f} ms", (dom.lo_m, dom.hi_m), period=period)
         lines = [
             f"# Lay-down: scene `{scene.name}`", "",
             f"- fibers injected: {n_fib} ({m_inj:.6g} kg); initial heights "

@@ -126,15 +126,17 @@ def nominal_fiber_thickness(scene: Scene) -> float:
 def periodic_chains(chains: list[Chain], period: tuple[float, float]) -> list[Chain]:
     """The fiber chains of a periodic lay-down (``laydown.walls: periodic``: unwrapped, up to a
     fiber length out of the piece) with their images shifted by whole periods (Lx, Ly), m, that
-    reach into the piece (fiber_sheet.periodic_images, margin: the chain's half-width): the
+    reach into the piece (fiber_sheet.periodic_images; margin: the widest chain's half-width, so
+    every image whose section reaches in is taken, and one whose does not adds nothing): the
     volume-fraction fields clip chains to the piece, so a fiber across a side enters on both sides
     and no fiber volume is lost or counted twice."""
-    out: list[Chain] = []
-    for c in chains:
-        x, offs, _, _ = periodic_images(c.points, np.array([0, len(c.points)]), period, margin=c.radius)
-        out.extend(Chain(x[lo:hi].copy(), c.radius, c.half_thickness)
-                   for lo, hi in zip(offs[:-1], offs[1:]))
-    return out
+    if not chains:
+        return []
+    offsets = np.cumsum([0] + [len(c.points) for c in chains])
+    x, offs, src, _ = periodic_images(np.vstack([c.points for c in chains]), offsets, period,
+                                      margin=max(c.radius for c in chains))
+    return [Chain(x[lo:hi].copy(), chains[k].radius, chains[k].half_thickness)
+            for k, lo, hi in zip(src, offs[:-1], offs[1:])]
 
 
 def law_radius(c: Chain) -> float:

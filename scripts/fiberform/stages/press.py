@@ -40,7 +40,7 @@ from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, laydown_beam_options, write_nodes_subset
 from ..fiber_sheet import (
     YARNS_FIX, Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
-    frame_fibers, frame_quaternions, lateral_period, node_dump_columns, node_extents, periodic_images,
+    frame_fibers, frame_quaternions, lateral_period, node_dump_columns, node_extents,
     product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric,
     solid_fraction_profile, static_force_refs, tile_yarns, wrap_chains, write_sheet_png,
     write_sheet_vtu, write_yarns,
@@ -617,14 +617,11 @@ class Press(Stage):
         shutil.copyfile(final, tmp[RESTART_NAME])
 
         write_sheet_vtu(tmp[VTU_NAME], x_last, fid_last, off_last)
-        # periodic: every image of a fiber that reaches into the box, on the fabric's own yarns
-        x_png, off_png, of_png = x_last, off_last, None
-        if period is not None:
-            x_png, off_png, of_png, _ = periodic_images(x_last, off_last, period)
-        write_sheet_png(tmp[PNG_NAME], x_png, off_png, yarns.points, yarns.offsets, yarns.radius,
+        # on the fabric's own yarns (periodic: every image of a fiber that reaches into the box)
+        write_sheet_png(tmp[PNG_NAME], x_last, off_last, yarns.points, yarns.offsets, yarns.radius,
                         f"{scene.name}: pressed sheet ({pr.mode} mode), plate at "
                         f"{plate_z[-1] * 1e3:.4f} mm", (dom.lo_m, dom.hi_m), plate_z=float(plate_z[-1]),
-                        colour_of=of_png)
+                        period=period)
         _write_curve(tmp[CURVE_NAME], thick_plate, np.array(span), pressure, phase,
                      f"{scene.name}: pressure vs thickness ({pr.mode} mode)")
         summary = _summary(pr, t, pressure, thick_plate, np.array(span), np.array(phi_thick),
