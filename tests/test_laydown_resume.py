@@ -174,3 +174,47 @@ def test_resume_after_a_removal_lists_only_the_fibers_left(tmp_path: Path) -> No
     rows = [ln.split() for ln in (work / "fibers.nodes").read_text().splitlines() if not ln.startswith("#")]
     assert sorted({int(r[1]) for r in rows}) == [1, 3, 4]
     assert len(rows) == 6
+
+
+def test_resume_recovers_a_removal_the_log_lost(tmp_path: Path) -> None:
+    """A killed run whose log lost a removal line (a buffered log: the restart file was written,
+    the line was not): the removal is recovered from the snapshots, at the step of the first
+    snapshot without the fiber, and the nodes file of the resumed run lists only the fibers the
+    restart file holds. A log that reports a fiber removed which the snapshot still holds is an
+    error, not silently merged."""
+    from fiberform.errors import StageError
+    from fiberform.stages.laydown import EARLIER_LOG, LOG_NAME, TRAJ_NAME, nodes_left, prepare_resume
+
+    work = tmp_path / "work"
+    work.mkdir()
+    src = tmp_path / "fibers.nodes"
+    src.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
+                                          for f in range(4) for k in range(2)))
+
+    def snapshot(step: int, fibers: list[int]) -> str:
+        rows = [f"{2 * (f - 1) + k + 1} 1e-12 0 0 0 {f} {k}" for f in fibers for k in range(2)]
+        return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(rows)}\n"
+                "ITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\nITEM: ATOMS id mass x y z f_beam[1] f_beam[2]\n"
+                + "".join(r + "\n" for r in rows))
+
+    dump = (snapshot(0, [1, 2, 3, 4]) + snapshot(1000, [1, 3, 4]) + snapshot(2000, [1, 3, 4])
+            + snapshot(3000, [1, 4]) + snapshot(4000, [1]))
+    (work / TRAJ_NAME).write_text(dump)
+    # fiber 2 logged at 1000; fiber 3's line (step 3000) lost; fiber 4 (after the restart) not reached
+    (work / LOG_NAME).write_text("fix fiber/remove: step 1000 removed fiber(s) 2\n")
+    prepare_resume(work, 3000, src)
+    earlier = (work / EARLIER_LOG).read_text()
+    assert "step 1000 removed fiber(s) 2\n" in earlier
+    assert "step 3000 removed fiber(s) 3 (recovered from the snapshots)" in earlier
+    assert "fiber(s) 4" not in earlier
+    assert (work / TRAJ_NAME).read_text() == snapshot(0, [1, 2, 3, 4]) + snapshot(1000, [1, 3, 4]) + snapshot(2000, [1, 3, 4])
+    nodes_left(work, src)
+    rows = [ln.split() for ln in (work / "fibers.nodes").read_text().splitlines() if not ln.startswith("#")]
+    assert sorted({int(r[1]) for r in rows}) == [1, 4]
+
+    # a log that contradicts the snapshots
+    (work / EARLIER_LOG).unlink()
+    (work / TRAJ_NAME).write_text(dump)
+    (work / LOG_NAME).write_text("fix fiber/remove: step 1000 removed fiber(s) 1\n")
+    with pytest.raises(StageError, match="holds them"):
+        prepare_resume(work, 3000, src)

@@ -358,7 +358,7 @@ class Laydown(Stage):
                 shutil.copyfile(paths[key], work / name)
             atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
         else:
-            prepare_resume(work, resume_step)
+            prepare_resume(work, resume_step, paths["fibers_nodes"])
             nodes_left(work, paths["fibers_nodes"])
         write_yarns(work / YARNS_NAME, paths["fabric_h5"], lateral_period(scene))
         (work / INPUT_NAME).write_text(render_input(scene, self._superficial_velocity(ctx), resume_step))
@@ -753,13 +753,15 @@ def resume_point(work: Path, hashes: Mapping[str, str],
     return good[-1] if good else None
 
 
-def prepare_resume(work: Path, step: int) -> None:
+def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -> None:
     """Cut the snapshots and the log of the killed run back to the restart step: the resumed run
-    writes the snapshot of that step again and everything after it."""
+    writes the snapshot of that step again and everything after it. The removals up to the
+    restart step (they are in the restart file's state) keep their log lines in EARLIER_LOG; with
+    ``generated_nodes`` (the generated fibers' nodes file) a removal whose log line the killed run
+    did not get out (a buffered log) is recovered from the snapshots (:func:`removals_from_dump`)."""
     dump = work / TRAJ_NAME
     text = dump.read_text(errors="replace")
-    keep = next((pos for s, pos in dump_snapshots(text) if s >= step), len(text))
-    atomic_write_text(dump, text[:keep])
+    snapshots = dump_snapshots(text)
     # removals up to the restart step are in the restart file's state: keep their log lines
     earlier = work / EARLIER_LOG
     old = (earlier.read_text(errors="replace") if earlier.is_file() else "")
@@ -767,10 +769,59 @@ def prepare_resume(work: Path, step: int) -> None:
     if log.is_file():
         old += log.read_text(errors="replace")
     kept = [m.group(0) for m in _REMOVED.finditer(old) if int(m.group(1)) <= step]
+    if generated_nodes is not None:
+        logged = removed_fibers("\n".join(kept))
+        kept += [f"fix fiber/remove: step {s} removed fiber(s) "
+                 + " ".join(str(i + 1) for i in sorted(ids)) + " (recovered from the snapshots)"
+                 for s, ids in removals_from_dump(text, snapshots, step,
+                                                  fibers_in_nodes(generated_nodes), logged)]
+    keep = next((pos for s, pos in snapshots if s >= step), len(text))
     atomic_write_text(earlier, "".join(line + "\n" for line in kept))
+    atomic_write_text(dump, text[:keep])
     for s in restart_steps(work):
         if s > step:
             (work / f"{RESTART_STEM}.{s}.{RESTART_EXT}").unlink()
+
+
+def snapshot_fibers(text: str, pos: int) -> set[int]:
+    """0-based indices of the fibers (column f_beam[1], 1-based) in the dump snapshot whose header
+    starts at ``pos`` of the dump text ``text``."""
+    lines = iter(text[pos:].splitlines())
+    line = next(lines, "")
+    while line and not line.startswith("ITEM: NUMBER OF ATOMS"):
+        line = next(lines, "")
+    n = int(next(lines, "0"))
+    while line and not line.startswith("ITEM: ATOMS"):
+        line = next(lines, "")
+    col = line.split()[2:].index("f_beam[1]")
+    return {int(round(float(next(lines).split()[col]))) - 1 for _ in range(n)}
+
+
+def removals_from_dump(text: str, snapshots: list[tuple[int, int]], up_to_step: int,
+                       generated: set[int], logged: set[int]) -> list[tuple[int, set[int]]]:
+    """Removals of the fibers ``generated`` that the log does not report (``logged``), from the
+    snapshots of a lay-down dump (``snapshots``: :func:`dump_snapshots` of ``text``) up to and
+    including ``up_to_step``: (the step of the first snapshot without the fiber, fibers), in step
+    order. The step is the removal step when the dump interval is the removal check interval
+    (the lay-down writes both every check) and an upper bound otherwise. Raises StageError when
+    the log reports a fiber removed that the snapshot of ``up_to_step`` still holds."""
+    upto = [(s, pos) for s, pos in snapshots if s <= up_to_step]
+    if not upto:
+        return []
+    present = snapshot_fibers(text, upto[-1][1])
+    if present & logged:
+        raise StageError(f"the lay-down log reports fibers {sorted(i + 1 for i in present & logged)} "
+                         f"removed, but the snapshot of step {upto[-1][0]} holds them")
+    lost = generated - present - logged
+    out: list[tuple[int, set[int]]] = []
+    for s, pos in upto:
+        if not lost:
+            break
+        gone = lost - snapshot_fibers(text, pos)
+        if gone:
+            out.append((s, gone))
+            lost -= gone
+    return out
 
 
 def removed_fibers(log: str, up_to_step: int | None = None) -> set[int]:
