@@ -468,6 +468,47 @@ def test_stage_on_bare_fabric(tmp_path: Path) -> None:
 
 @pytest.mark.system
 @needs_openfoam
+def test_stop_at_the_converged_window(tmp_path: Path) -> None:
+    """permeability.stop_at converged (the default) ends simpleFoam at the first iteration whose
+    last convergence_window outflows vary by at most convergence_tolerance of their mean. The
+    reference is the same solve run to max_iterations (stop_at max_iterations, residual criterion
+    out of reach): the stop iteration must be the first one at which the reference's own history
+    meets the criterion, the histories equal up to there, and the result lie within the stated
+    uncertainty of the reference's."""
+    env = dict(os.environ, WM_PROJECT_DIR=os.environ.get("WM_PROJECT_DIR", "/usr/share/openfoam"))
+    window, tol, n_max = 100, 1e-3, 600
+    perm = (f"permeability: {{cells_across_fiber: 2, max_iterations: {n_max}, residual_tolerance: 1.0e-12, "
+            f"convergence_window: {window}, convergence_tolerance: {tol}, pressure_drop_Pa: 10.0")
+    body = BARE.split("permeability:")[0]
+    (tmp_path / "stop.yaml").write_text(body.replace("permtest", "permstop") + perm + "}\n")
+    (tmp_path / "max.yaml").write_text(body.replace("permtest", "permmax") + perm
+                                       + ", stop_at: max_iterations}\n")
+    for scene in ("stop.yaml", "max.yaml"):
+        for stage in ("fabric", "permeability"):
+            r = subprocess.run([sys.executable, "-m", "fiberform", stage, scene], cwd=tmp_path, env=env,
+                               capture_output=True, text=True, errors="replace", timeout=600, check=False)
+            assert r.returncode == 0, r.stdout + r.stderr
+
+    def read(name: str) -> tuple[np.ndarray, int, float, float]:
+        with h5py.File(tmp_path / "runs" / name / "permeability-fabric" / "permeability.h5") as f:
+            return (f["history/q_bottom"][...], int(f["solver"].attrs["iterations"]),
+                    float(f["result/superficial_velocity"][()]),
+                    float(f["result/superficial_velocity_uncertainty"][()]))
+
+    q_ref, n_ref, u_ref, du_ref = read("permmax")
+    q, n, u, du = read("permstop")
+    assert n_ref == n_max  # the reference ran to the end
+    first = next(i for i in range(window, len(q_ref) + 1)
+                 if np.ptp(q_ref[i - window:i]) <= tol * abs(np.mean(q_ref[i - window:i])))
+    assert n == first < n_max
+    assert np.array_equal(q, q_ref[:n])  # the same solve up to the stop
+    log = (tmp_path / "runs" / "permstop" / "permeability-fabric" / "log.simpleFoam").read_text()
+    assert "flowRateConvergence flowRateConverged: flow rate through bottom converged" in log
+    assert abs(u - u_ref) <= du + du_ref + tol * u_ref
+
+
+@pytest.mark.system
+@needs_openfoam
 def test_stage_on_one_and_two_ranks(tmp_path: Path) -> None:
     """permeability.ranks 2 (decomposePar, simpleFoam -parallel) gives the superficial velocity of
     the serial run within 1e-4 (measured: 3.4e-6 on the bare fabric at 10 Pa; domain decomposition

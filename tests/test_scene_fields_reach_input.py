@@ -127,7 +127,7 @@ PERM_ALTERNATIVES: dict[str, object] = {
     "cells_across_fiber": 6, "subsamples": 3, "height_above_m": 0.4e-3,
     "max_cell_height_m": 1.0e-4, "max_cells": 3_000_000, "max_iterations": 500,
     "residual_tolerance": 1.0e-5, "convergence_window": 50, "convergence_tolerance": 1.0e-2,
-    "ranks": 2, "mode": "subgrid", "subgrid_cell_size_m": 40.0e-6,
+    "ranks": 2, "mode": "subgrid", "subgrid_cell_size_m": 40.0e-6, "stop_at": "max_iterations",
     "subgrid_law": "drummond_tahir", "forchheimer_pressure_drop_Pa": 60.0,
 }
 PERM_SINGLE_CHOICE: set[str] = set()

@@ -244,6 +244,7 @@ def run_one(case: str, variant: str, ranks: int, seed: int, max_time: float | No
         "min_element_yarn_clearance_m": float(a["min_element_clearance_m"]),
         "fiber_contact": str(a.get("fiber_contact", "")),
     })
+    row["edge_interior_grammage"] = edge_interior_grammage(out)
     row["run_dir"] = str(out.relative_to(ROOT))
     return row
 
@@ -277,6 +278,31 @@ def sheet_measures(run_dir: Path) -> dict[str, Any]:
     zedges = np.arange(top - 10 * PROFILE_DZ, x[:, 2].max() + 2 * PROFILE_DZ, PROFILE_DZ)
     prof, _ = np.histogram(x[:, 2], bins=zedges, weights=m)
     return {"map": gmap / (sx * sy / MAP_BINS ** 2), "profile": prof / (sx * sy)}
+
+
+EDGE_BAND_M = 0.2e-3  # the band along the piece's four sides of edge_interior_grammage
+
+
+def edge_interior_grammage(run_dir: Path, band_m: float = EDGE_BAND_M) -> float:
+    """Grammage in the band ``band_m`` wide along the four sides of the fabric piece over the
+    grammage inside it (1: no side effect), from the final sheet's nodes (each fiber's mass shared
+    equally by its nodes; a periodic sheet's nodes wrapped into the piece): the thin margin of
+    fibers placed inside the box (docs/validation/table41.md, open question (d))."""
+    scene = yaml.safe_load((run_dir / "scene.yaml").read_text())
+    sx, sy = float(scene["fabric"]["size_x_m"]), float(scene["fabric"]["size_y_m"])
+    with h5py.File(run_dir / "fibers" / "fibers.h5", "r") as f:
+        fiber_mass = f["fibers/mass"][...]
+    sheet = read_sheet(run_dir / "laydown" / "laydown.h5")
+    x = sheet.x[:, :2].copy()
+    if scene.get("laydown", {}).get("walls") == "periodic":
+        x[:, 0], x[:, 1] = np.mod(x[:, 0], sx), np.mod(x[:, 1], sy)
+    counts = np.diff(sheet.offsets)
+    m = np.repeat(fiber_mass[sheet.fiber_id] / counts, counts)
+    inner = ((x[:, 0] >= band_m) & (x[:, 0] <= sx - band_m) & (x[:, 1] >= band_m) & (x[:, 1] <= sy - band_m))
+    inner_area = (sx - 2 * band_m) * (sy - 2 * band_m)
+    g_in = m[inner].sum() / inner_area
+    g_edge = m[~inner].sum() / (sx * sy - inner_area)
+    return float(g_edge / g_in) if g_in > 0 else float("nan")
 
 
 def compare(row: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:

@@ -38,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ._versions import repo_root
-from .errors import StageError
+from .errors import ConfigError, StageError
 from .provenance import atomic_write_text, file_hash, text_hash
 from .runner import Program, openfoam_progress, run
 
@@ -76,6 +76,10 @@ TEMPLATE = "fabric-flow"
 MAX_GROWTH = 1.2
 #: Name of the function object that records the outflow through ``bottom`` at every iteration.
 FLOW_RATE_FO = "flowRateBottom"
+FLOW_RATE_STOP_FO = "flowRateConverged"  # ends a recorded solve once its outflow converged
+#: the shared library of fiberform's function objects, relative to the build directory
+FUNCTION_OBJECTS_LIB = "lib/libfiberformFunctionObjects.so"
+SAFE_LIBRARY_PATH = re.compile(r"/[A-Za-z0-9._+/-]+")
 #: Iterations between the time directories simpleFoam writes while it runs (the points a killed
 #: run resumes from); ``purgeWrite`` keeps the last two, so a half-written last one leaves the
 #: one before it.
@@ -117,6 +121,12 @@ class BoxSetup:
     #: cell layers of the zone (None: its height / cell_size_m, rounded); the permeability stage
     #: sets it so that a fabric is cut into the same layers under every sheet
     zone_layers: int | None = None
+    #: end the solve at the first iteration whose last ``stop_window`` outflows vary by at most
+    #: ``stop_tolerance`` of their mean (fiberform's function object flowRateConvergence, from the
+    #: shared library ``stop_library``, an absolute path); 0: run to max_iterations
+    stop_window: int = 0
+    stop_tolerance: float = 0.0
+    stop_library: str = ""
 
 
 def geometric_cells(length: float, first: float, largest: float) -> tuple[int, float]:
@@ -273,6 +283,38 @@ def patch_flux_sum(patch: str) -> dict[str, Any]:
     }
 
 
+def flow_rate_stop(patch: str, window: int, tolerance: float, library: str) -> dict[str, Any]:
+    """A function object ending the solve once sum(phi) over ``patch`` varied by at most
+    ``tolerance`` of its mean over the last ``window`` iterations (flowRateConvergence in the
+    shared library ``library``, coupling/functionObjects/). ``library`` must be an absolute path
+    of plain characters (it is written into controlDict)."""
+    if not SAFE_LIBRARY_PATH.fullmatch(library):
+        raise ConfigError(f"the function-object library path {library!r} must be absolute and "
+                          "contain only letters, digits and . _ + - / (it goes into controlDict); "
+                          "build fiberform in such a directory")
+    if not (int(window) >= 2 and float(tolerance) > 0.0):
+        raise ValueError(f"flow_rate_stop: window {window} (>= 2) and tolerance {tolerance} (> 0)")
+    return {
+        "type": "flowRateConvergence",
+        "libs": [f'"{library}"'],
+        "patch": patch,
+        "window": int(window),
+        "tolerance": float(tolerance),
+    }
+
+
+def seed_flow_rate_stop(case: Path, start: int, window: int) -> None:
+    """A resumed solve's stop criterion starts from the recorded outflows of the last ``window``
+    iterations up to ``start`` (the killed run's history), so that the resumed solve ends at the
+    iteration an uninterrupted one would."""
+    from foamlib import FoamFile
+
+    its, q = read_patch_history(case, FLOW_RATE_FO)
+    earlier = [float(v) for v in q[its <= start + 0.5][-int(window):] if math.isfinite(v)]
+    with FoamFile(case / "system" / "controlDict") as c:
+        c["functions"][FLOW_RATE_STOP_FO]["initial"] = earlier
+
+
 def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool) -> None:
     from foamlib import FoamFile
 
@@ -283,7 +325,11 @@ def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool)
         c["writeFormat"] = "ascii"
         if record_flow_rate:
             # sum(phi) over the outlet after every SIMPLE iteration (the flow-rate history)
-            c["functions"] = {FLOW_RATE_FO: patch_flux_sum("bottom")}
+            functions: dict[str, Any] = {FLOW_RATE_FO: patch_flux_sum("bottom")}
+            if s.stop_window > 0:
+                functions[FLOW_RATE_STOP_FO] = flow_rate_stop("bottom", s.stop_window, s.stop_tolerance,
+                                                              s.stop_library)
+            c["functions"] = functions
     with FoamFile(case / "system" / "fvSolution") as f:
         f["SIMPLE"]["residualControl"]["p"] = float(s.residual_tolerance)
         f["SIMPLE"]["residualControl"]["U"] = float(s.residual_tolerance)
@@ -566,6 +612,8 @@ def prepare_or_resume(
     if start is not None:
         prep = load_prepared(work, s, key)
         keep_earlier_log(prep.work)
+        if record_flow_rate and s.stop_window > 0:
+            seed_flow_rate_stop(prep.work / CASE_DIR, start, s.stop_window)
         _write_record(prep.work / CASE_DIR, key, prep.wall_times_s, start)
         return dataclasses.replace(prep, start_iteration=start)
     lat = make_lattice(s)

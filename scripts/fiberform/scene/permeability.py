@@ -83,6 +83,13 @@ class PermeabilitySection(_Section):
         "Largest (max - min) / mean of the outflow over the window for a converged result", "1",
         default=1e-3, gt=0.0, le=0.5,
     )  # fmt: skip
+    stop_at: Literal["converged", "max_iterations"] = choice(
+        "When simpleFoam stops: converged = at the first iteration whose last convergence_window "
+        "outflows meet convergence_tolerance (fiberform's function object flowRateConvergence; "
+        "the result is the mean over that window), max_iterations = only at max_iterations or "
+        "residual_tolerance (the result is the mean over the last window then)",
+        default="converged",
+    )
     ranks: int = quantity(
         "MPI ranks of the solver (> 1: decomposePar + simpleFoam -parallel)", "1",
         default=1, ge=1, le=64,

@@ -23,11 +23,13 @@ With ``forchheimer_pressure_drop_Pa`` a second case runs at that pressure drop (
 ``forchheimer/``) and the Darcy permeability k_D and the Forchheimer coefficient beta of
 dp / L = (mu / k_D) u + beta rho u^2 are fitted through the two superficial velocities.
 
-Convergence (thesis sec. 5.2: the permeability "oscillates"): simpleFoam stops when the initial
-residuals of p and U fall below ``residual_tolerance`` or at ``max_iterations``; the outflow through
-the bottom is recorded at every iteration, and the result is the mean over the last
-``convergence_window`` iterations, with half its range as the uncertainty; it counts as converged
-when the range is at most ``convergence_tolerance`` of the mean.
+Convergence (thesis sec. 5.2: the permeability "oscillates"): the outflow through the bottom is
+recorded at every iteration, and the result is the mean over the last ``convergence_window``
+iterations, with half its range as the uncertainty; it counts as converged when the range is at
+most ``convergence_tolerance`` of the mean. simpleFoam stops at the first iteration where that
+holds (``stop_at: converged``, the default: fiberform's function object flowRateConvergence,
+coupling/functionObjects/), when the initial residuals of p and U fall below
+``residual_tolerance``, or at ``max_iterations``.
 
 Products in ``<output_dir>/permeability-laydown/`` (scene with a ``laydown`` section: fabric plus
 the sheet of the lay-down) or ``<output_dir>/permeability-fabric/`` (bare fabric):
@@ -51,6 +53,7 @@ from ..errors import ConfigError, StageError
 from ..fabric_geometry import VoxelImage
 from ..fiber_io import outer_half_axes
 from ..openfoam_case import (
+    FUNCTION_OBJECTS_LIB,
     BoxSetup, CaseResult, Lattice, SolidFraction, collect_case, load_prepared, make_lattice,
     plot_section, prepare_or_resume, solver_program, solver_wall_time, template_hash,
     write_solver_record,
@@ -64,7 +67,7 @@ from ..products import (
     read_yarn_chains,
 )  # fmt: skip
 from ..fiber_sheet import lateral_period, periodic_images
-from ..provenance import write_dataset
+from ..provenance import file_hash, write_dataset
 from ..scene import PermeabilitySection, Scene
 from ._stage import Program, Stage, StageContext, resumes
 
@@ -159,10 +162,12 @@ def zone_layers(geo: PermeabilityGeometry, h: float) -> tuple[int, float]:
     return n, geo.lower_z_m + n * hz
 
 
-def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup:
+def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry, stop_library: str = "") -> BoxSetup:
     """The box case of a permeability run: zone cells of thinnest / cells_across_fiber (resolved)
     or subgrid_cell_size_m (subgrid), in the layers of :func:`zone_layers`; the domain's top
-    ``height_above_m`` above the zone."""
+    ``height_above_m`` above the zone. With ``stop_at: converged`` the solve ends at the
+    convergence window (function object flowRateConvergence of ``stop_library``, the absolute
+    path of the build's FUNCTION_OBJECTS_LIB)."""
     if perm.mode == "subgrid":
         h = perm.subgrid_cell_size_m
     else:
@@ -183,15 +188,20 @@ def case_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup
         residual_tolerance=perm.residual_tolerance,
         ranks=perm.ranks,
         zone_layers=layers,
+        stop_window=perm.convergence_window if perm.stop_at == "converged" else 0,
+        stop_tolerance=perm.convergence_tolerance if perm.stop_at == "converged" else 0.0,
+        stop_library=stop_library if perm.stop_at == "converged" else "",
     )
 
 
-def forchheimer_setup(perm: PermeabilitySection, geo: PermeabilityGeometry) -> BoxSetup | None:
+def forchheimer_setup(perm: PermeabilitySection, geo: PermeabilityGeometry,
+                      stop_library: str = "") -> BoxSetup | None:
     """The second case of the Forchheimer fit (the first at ``forchheimer_pressure_drop_Pa``), None
     without that field."""
     if perm.forchheimer_pressure_drop_Pa is None:
         return None
-    return dataclasses.replace(case_setup(perm, geo), delta_p_Pa=perm.forchheimer_pressure_drop_Pa)
+    return dataclasses.replace(case_setup(perm, geo, stop_library),
+                               delta_p_Pa=perm.forchheimer_pressure_drop_Pa)
 
 
 def solid_fraction(geo: PermeabilityGeometry, perm: PermeabilitySection) -> SolidFraction:
@@ -319,7 +329,15 @@ class PermeabilityStage(Stage):
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
         hashes["case_template"] = template_hash()
+        lib = Path(self.function_objects(ctx))
+        if ctx.scene.permeability is not None and ctx.scene.permeability.stop_at == "converged":
+            hashes["function_objects"] = file_hash(lib) if lib.is_file() else "missing"
         return hashes
+
+    @staticmethod
+    def function_objects(ctx: StageContext) -> str:
+        """Absolute path of the build's function-object library (flowRateConvergence)."""
+        return str((ctx.build_dir / FUNCTION_OBJECTS_LIB).resolve())
 
     def preflight(self, ctx: StageContext) -> None:
         for key, p in self.needs(ctx).items():
@@ -328,6 +346,11 @@ class PermeabilityStage(Stage):
                                  "(fiberform run SCENE runs them in order)")  # fmt: skip
         if shutil.which("simpleFoam") is None:
             raise ConfigError("simpleFoam not found on PATH (install Debian's openfoam package)")
+        perm = ctx.scene.permeability
+        if perm is not None and perm.stop_at == "converged" and not Path(self.function_objects(ctx)).is_file():
+            raise ConfigError(f"{self.function_objects(ctx)} not found (permeability.stop_at: converged "
+                              "needs fiberform's function objects): build first (make build), or "
+                              "set permeability.stop_at: max_iterations")
 
     def geometry(self, ctx: StageContext) -> PermeabilityGeometry:
         paths = self.needs(ctx)
@@ -371,7 +394,8 @@ class PermeabilityStage(Stage):
         perm = ctx.scene.permeability
         assert perm is not None
         geo = self.geometry(ctx)
-        s = case_setup(perm, geo)
+        lib = self.function_objects(ctx)
+        s = case_setup(perm, geo, lib)
         lat = make_lattice(s)
         if lat.cells > perm.max_cells:
             raise StageError(
@@ -379,7 +403,7 @@ class PermeabilityStage(Stage):
                 f"permeability.max_cells = {perm.max_cells}); lower cells_across_fiber or raise "
                 "subgrid_cell_size_m"
             )
-        s2 = forchheimer_setup(perm, geo)
+        s2 = forchheimer_setup(perm, geo, lib)
         d = self.stage_dir(ctx)
         return geo, [(s, d), *([(s2, d / FORCHHEIMER_DIR)] if s2 is not None else [])]
 
@@ -614,7 +638,10 @@ def report_lines(
         f"- convergence: outflow range over the last {conv.window} iterations "
         f"{conv.relative_amplitude:.2g} of its mean (tolerance {perm.convergence_tolerance:g}): "
         f"{'converged' if conv.converged else '**NOT converged**'}; simpleFoam "
-        f"{res.iterations} iterations, residual criterion {s.residual_tolerance:g} "
+        f"{res.iterations} iterations ("
+        + (f"stop_at converged: ends at the first converged window, at most {s.max_iterations}"
+           if s.stop_window > 0 else f"stop_at max_iterations: {s.max_iterations}")
+        + f"), residual criterion {s.residual_tolerance:g} "
         f"{'met' if res.converged else 'not met'}",
         f"- mass conservation: |inflow - outflow| / outflow = {res.imbalance:.2e}",
         (f"- sub-grid: fibers as a Darcy resistance 1/k(phi) per cell, k from {perm.subgrid_law} "
