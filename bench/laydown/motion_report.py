@@ -41,7 +41,10 @@ def main() -> None:
     a = ap.parse_args()
     work = a.run / "laydown" / "work"
     fiber_of: dict[int, tuple[int, int]] = {}
-    for line in (work / NODES_NAME).read_text().splitlines():
+    # the generated fibers' nodes file (the working folder's copy of a resumed run lists only the
+    # fibers left at its restart step, the dump's earlier snapshots hold the removed ones too)
+    generated = a.run / "fibers" / NODES_NAME
+    for line in (generated if generated.is_file() else work / NODES_NAME).read_text().splitlines():
         if line.startswith("#") or not line.strip():
             continue
         p = line.split()
