@@ -257,10 +257,10 @@ def above_fabric(run_dir: Path, fabric_top: float) -> float:
     return product_thickness_above_fabric(scene, run_dir / "laydown" / "laydown.h5", fabric_top)
 
 
-def sheet_measures(run_dir: Path) -> dict[str, Any]:
-    """Grammage map (kg/m^2, MAP_BINS x MAP_BINS over the fabric piece) and mass profile over z
-    (kg/m^2 per slab of PROFILE_DZ, from 10 slabs below the fabric top) of a lay-down's final sheet;
-    each fiber's mass (fibers.h5) shared equally by its nodes."""
+def sheet_nodes(run_dir: Path) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """A lay-down's final sheet as nodes: positions (m; a periodic sheet's wrapped into the piece
+    in x and y), masses (kg: each fiber's mass, fibers.h5, shared equally by its nodes), the fabric
+    piece's size x, y and the fabric top (m)."""
     scene = yaml.safe_load((run_dir / "scene.yaml").read_text())
     sx, sy = float(scene["fabric"]["size_x_m"]), float(scene["fabric"]["size_y_m"])
     with h5py.File(run_dir / "fibers" / "fibers.h5", "r") as f:
@@ -273,6 +273,14 @@ def sheet_measures(run_dir: Path) -> dict[str, Any]:
         x[:, 0], x[:, 1] = np.mod(x[:, 0], sx), np.mod(x[:, 1], sy)
     counts = np.diff(sheet.offsets)
     m = np.repeat(fiber_mass[sheet.fiber_id] / counts, counts)
+    return x, m, sx, sy, top
+
+
+def sheet_measures(run_dir: Path) -> dict[str, Any]:
+    """Grammage map (kg/m^2, MAP_BINS x MAP_BINS over the fabric piece) and mass profile over z
+    (kg/m^2 per slab of PROFILE_DZ, from 10 slabs below the fabric top) of a lay-down's final sheet
+    (:func:`sheet_nodes`)."""
+    x, m, sx, sy, top = sheet_nodes(run_dir)
     gmap, _, _ = np.histogram2d(x[:, 0], x[:, 1], bins=[np.linspace(0.0, sx, MAP_BINS + 1),
                                                       np.linspace(0.0, sy, MAP_BINS + 1)], weights=m)
     zedges = np.arange(top - 10 * PROFILE_DZ, x[:, 2].max() + 2 * PROFILE_DZ, PROFILE_DZ)
@@ -285,19 +293,9 @@ EDGE_BAND_M = 0.2e-3  # the band along the piece's four sides of edge_interior_g
 
 def edge_interior_grammage(run_dir: Path, band_m: float = EDGE_BAND_M) -> float:
     """Grammage in the band ``band_m`` wide along the four sides of the fabric piece over the
-    grammage inside it (1: no side effect), from the final sheet's nodes (each fiber's mass shared
-    equally by its nodes; a periodic sheet's nodes wrapped into the piece): the thin margin of
-    fibers placed inside the box (docs/validation/table41.md, open question (d))."""
-    scene = yaml.safe_load((run_dir / "scene.yaml").read_text())
-    sx, sy = float(scene["fabric"]["size_x_m"]), float(scene["fabric"]["size_y_m"])
-    with h5py.File(run_dir / "fibers" / "fibers.h5", "r") as f:
-        fiber_mass = f["fibers/mass"][...]
-    sheet = read_sheet(run_dir / "laydown" / "laydown.h5")
-    x = sheet.x[:, :2].copy()
-    if scene.get("laydown", {}).get("walls") == "periodic":
-        x[:, 0], x[:, 1] = np.mod(x[:, 0], sx), np.mod(x[:, 1], sy)
-    counts = np.diff(sheet.offsets)
-    m = np.repeat(fiber_mass[sheet.fiber_id] / counts, counts)
+    grammage inside it (1: no side effect), from the final sheet's nodes (:func:`sheet_nodes`):
+    the thin margin of fibers placed inside the box (docs/validation/table41.md, open question (d))."""
+    x, m, sx, sy, _ = sheet_nodes(run_dir)
     inner = ((x[:, 0] >= band_m) & (x[:, 0] <= sx - band_m) & (x[:, 1] >= band_m) & (x[:, 1] <= sy - band_m))
     inner_area = (sx - 2 * band_m) * (sy - 2 * band_m)
     g_in = m[inner].sum() / inner_area

@@ -62,6 +62,26 @@ class Frame:
     columns: dict[str, npt.NDArray[np.float64]]
 
 
+def _parse_frame(lines: list[str], i: int) -> tuple[Frame, int]:
+    """The frame whose ``ITEM: TIMESTEP`` line is ``lines[i]``, and the index of the line after it.
+    Raises IndexError or ValueError for a malformed or cut-off frame."""
+    step = int(lines[i + 1])
+    if not lines[i + 2].startswith("ITEM: NUMBER OF ATOMS"):
+        raise ValueError("NUMBER OF ATOMS expected")
+    n = int(lines[i + 3])
+    j = i + 4
+    while not lines[j].startswith("ITEM: ATOMS"):
+        j += 1
+    names = lines[j].split()[2:]
+    rows = np.array([[float(x) for x in lines[j + 1 + k].split()] for k in range(n)])
+    rows = rows.reshape(n, len(names))
+    order = np.argsort(rows[:, names.index("id")], kind="stable")
+    rows = rows[order]
+    cols = {name: rows[:, c] for c, name in enumerate(names)}
+    ids = cols.pop("id").astype(np.int64)
+    return Frame(step, ids, cols), j + 1 + n
+
+
 def read_dump(path: Path) -> list[Frame]:
     """Read every frame of a ``dump custom`` text file."""
     try:
@@ -75,24 +95,21 @@ def read_dump(path: Path) -> list[Frame]:
             if not lines[i].startswith("ITEM: TIMESTEP"):
                 i += 1
                 continue
-            step = int(lines[i + 1])
-            if not lines[i + 2].startswith("ITEM: NUMBER OF ATOMS"):
-                raise ValueError("NUMBER OF ATOMS expected")
-            n = int(lines[i + 3])
-            j = i + 4
-            while not lines[j].startswith("ITEM: ATOMS"):
-                j += 1
-            names = lines[j].split()[2:]
-            rows = np.array([[float(x) for x in lines[j + 1 + k].split()] for k in range(n)])
-            rows = rows.reshape(n, len(names))
-            order = np.argsort(rows[:, names.index("id")], kind="stable")
-            rows = rows[order]
-            cols = {name: rows[:, c] for c, name in enumerate(names)}
-            ids = cols.pop("id").astype(np.int64)
-            frames.append(Frame(step, ids, cols))
-            i = j + 1 + n
+            frame, i = _parse_frame(lines, i)
+            frames.append(frame)
     except (IndexError, ValueError) as exc:
         raise StageError(f"malformed dump {path} near line {i + 1}: {exc}") from None
     if not frames:
         raise StageError(f"dump {path} holds no frame")
     return frames
+
+
+def dump_frame(text: str, pos: int) -> Frame:
+    """The frame whose ``ITEM: TIMESTEP`` header starts at character ``pos`` of a dump file's
+    text (only that frame's lines are split)."""
+    end = text.find("ITEM: TIMESTEP", pos + 1)
+    lines = text[pos:end if end >= 0 else len(text)].splitlines()
+    try:
+        return _parse_frame(lines, 0)[0]
+    except (IndexError, ValueError) as exc:
+        raise StageError(f"malformed dump frame at character {pos}: {exc}") from None

@@ -53,7 +53,7 @@ from ..fiber_sheet import (
     write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
 )
 from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_file_token
-from ..liggghts_log import read_dump, total_wall_time
+from ..liggghts_log import dump_frame, read_dump, total_wall_time
 from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
 from ..provenance import atomic_write_text, file_hash, write_dataset
@@ -786,15 +786,8 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
 def snapshot_fibers(text: str, pos: int) -> set[int]:
     """0-based indices of the fibers (column f_beam[1], 1-based) in the dump snapshot whose header
     starts at ``pos`` of the dump text ``text``."""
-    lines = iter(text[pos:].splitlines())
-    line = next(lines, "")
-    while line and not line.startswith("ITEM: NUMBER OF ATOMS"):
-        line = next(lines, "")
-    n = int(next(lines, "0"))
-    while line and not line.startswith("ITEM: ATOMS"):
-        line = next(lines, "")
-    col = line.split()[2:].index("f_beam[1]")
-    return {int(round(float(next(lines).split()[col]))) - 1 for _ in range(n)}
+    fid = np.rint(dump_frame(text, pos).columns["f_beam[1]"]).astype(np.int64) - 1
+    return {int(i) for i in fid}
 
 
 def removals_from_dump(text: str, snapshots: list[tuple[int, int]], up_to_step: int,
