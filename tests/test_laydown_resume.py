@@ -218,3 +218,56 @@ def test_resume_recovers_a_removal_the_log_lost(tmp_path: Path) -> None:
     (work / LOG_NAME).write_text("fix fiber/remove: step 1000 removed fiber(s) 1\n")
     with pytest.raises(StageError, match="holds them"):
         prepare_resume(work, 3000, src)
+
+
+def test_a_resume_killed_before_its_first_snapshot_resumes_again(tmp_path: Path) -> None:
+    """A resumed lay-down killed before it wrote its first snapshot (the dump was cut back to the
+    restart step): the next resume starts from the same restart file again (it was complete: the
+    first resume started from it), keeps it and the removals up to it, and does not mistake a
+    removal logged between the last snapshot and the restart step for a contradiction. (Session
+    19: the case-C run lost its 10 ms restart file this way and went back to 8 ms.)"""
+    import json
+
+    from fiberform.stages.laydown import (EARLIER_LOG, LOG_NAME, PREPARED_STEP, RESUME_STATE, TRAJ_NAME,
+                                          nodes_left, prepare_resume, resume_point)
+
+    work = tmp_path / "work"
+    work.mkdir()
+    src = tmp_path / "fibers.nodes"
+    src.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
+                                          for f in range(4) for k in range(2)))
+
+    def snapshot(step: int, fibers: list[int]) -> str:
+        rows = [f"{2 * (f - 1) + k + 1} 1e-12 0 0 0 {f} {k}" for f in fibers for k in range(2)]
+        return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(rows)}\n"
+                "ITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\nITEM: ATOMS id mass x y z f_beam[1] f_beam[2]\n"
+                + "".join(r + "\n" for r in rows))
+
+    hashes = {"scene": "sha256:1"}
+    (work / RESUME_STATE).write_text(json.dumps(hashes))
+    (work / TRAJ_NAME).write_text(snapshot(0, [1, 2, 3, 4]) + snapshot(2000, [1, 2, 3, 4])
+                                  + snapshot(4000, [1, 2, 4]) + snapshot(5000, [1, 2]))
+    (work / LOG_NAME).write_text("fix fiber/remove: step 3000 removed fiber(s) 3\n"
+                                 "fix fiber/remove: step 5000 removed fiber(s) 4\n")
+    for step in (2000, 3000):
+        (work / f"laydown.{step}.restart").write_text("restart\n")
+    (work / PREPARED_STEP).write_text(json.dumps({"resume_step": None}))
+
+    # the first resume: from 3000 (a snapshot after it exists)
+    assert resume_point(work, hashes) == 3000
+    prepare_resume(work, 3000, src)
+    earlier = (work / EARLIER_LOG).read_text()
+    assert earlier == "fix fiber/remove: step 3000 removed fiber(s) 3\n", earlier
+    assert (work / TRAJ_NAME).read_text() == snapshot(0, [1, 2, 3, 4]) + snapshot(2000, [1, 2, 3, 4])
+    (work / PREPARED_STEP).write_text(json.dumps({"resume_step": 3000}))
+    # ... killed at once: its log holds no line of fix fiber/remove, the dump no new snapshot
+    (work / LOG_NAME).write_text("LIGGGHTS (Version LIGGGHTS-PUBLIC 3.8.0)\nReading restart file ...\n")
+
+    # the second resume: from 3000 again, not 2000, and the 3000 restart file stays
+    assert resume_point(work, hashes) == 3000
+    prepare_resume(work, 3000, src)
+    assert (work / "laydown.3000.restart").is_file()
+    assert (work / EARLIER_LOG).read_text() == earlier
+    nodes_left(work, src)
+    rows = [ln.split() for ln in (work / "fibers.nodes").read_text().splitlines() if not ln.startswith("#")]
+    assert sorted({int(r[1]) for r in rows}) == [1, 2, 4]

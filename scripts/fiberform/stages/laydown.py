@@ -344,12 +344,13 @@ class Laydown(Stage):
         resume_step = resume_point(work, hashes, usable) if ctx.options.get("resume") else None
         if resume_step is None:
             earlier = restart_steps(work) if work.is_dir() else []
-            if earlier and not ctx.options.get("resume"):
+            if earlier:
                 import sys
 
+                why = ("none of them is certainly complete (no snapshot after it, no resume from it)"
+                       if ctx.options.get("resume") else "`--resume` continues from them")
                 print(f"fiberform laydown: starting over: the restart files of an earlier run in {work} "
-                      f"(steps {earlier[0]}-{earlier[-1]}) are removed; `--resume` continues from them",
-                      file=sys.stderr)
+                      f"(steps {earlier[0]}-{earlier[-1]}) are removed; {why}", file=sys.stderr)
             if work.exists():
                 shutil.rmtree(work)
             work.mkdir(parents=True)
@@ -735,9 +736,10 @@ def dump_steps(path: Path) -> list[int]:
 def resume_point(work: Path, hashes: Mapping[str, str],
                  usable: Callable[[int], bool] = lambda step: True) -> int | None:
     """The step to resume a killed lay-down from: the last restart file that is certainly complete
-    (the run wrote a snapshot after it) and ``usable`` (two_way: the fluid's state of that step
-    exists), if the working folder belongs to the same inputs; None: nothing to resume (start
-    over)."""
+    and ``usable`` (two_way: the fluid's state of that step exists), if the working folder belongs
+    to the same inputs; None: nothing to resume (start over). Complete: the run wrote a snapshot
+    after it, or an earlier resume started from it (PREPARED_STEP; a resumed run killed before its
+    first new snapshot must not lose that restart file)."""
     state = work / RESUME_STATE
     if not state.is_file():
         return None
@@ -749,7 +751,12 @@ def resume_point(work: Path, hashes: Mapping[str, str],
         raise StageError(f"{work}: the restart files belong to other inputs (scene, upstream "
                          "products or fiberdem changed); run without --resume to start over")
     done = max(dump_steps(work / TRAJ_NAME), default=-1)
-    good = [s for s in restart_steps(work) if s < done and usable(s)]
+    try:
+        resumed = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
+    except (OSError, ValueError, KeyError, TypeError):
+        resumed = None
+    complete = max(done - 1, int(resumed) if isinstance(resumed, int) else -1)
+    good = [s for s in restart_steps(work) if s <= complete and usable(s)]
     return good[-1] if good else None
 
 
@@ -770,11 +777,10 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
         old += log.read_text(errors="replace")
     kept = [m.group(0) for m in _REMOVED.finditer(old) if int(m.group(1)) <= step]
     if generated_nodes is not None:
-        logged = removed_fibers("\n".join(kept))
         kept += [f"fix fiber/remove: step {s} removed fiber(s) "
                  + " ".join(str(i + 1) for i in sorted(ids)) + " (recovered from the snapshots)"
                  for s, ids in removals_from_dump(text, snapshots, step,
-                                                  fibers_in_nodes(generated_nodes), logged)]
+                                                  fibers_in_nodes(generated_nodes), "\n".join(kept))]
     keep = next((pos for s, pos in snapshots if s >= step), len(text))
     atomic_write_text(earlier, "".join(line + "\n" for line in kept))
     atomic_write_text(dump, text[:keep])
@@ -791,19 +797,22 @@ def snapshot_fibers(text: str, pos: int) -> set[int]:
 
 
 def removals_from_dump(text: str, snapshots: list[tuple[int, int]], up_to_step: int,
-                       generated: set[int], logged: set[int]) -> list[tuple[int, set[int]]]:
-    """Removals of the fibers ``generated`` that the log does not report (``logged``), from the
-    snapshots of a lay-down dump (``snapshots``: :func:`dump_snapshots` of ``text``) up to and
+                       generated: set[int], log: str) -> list[tuple[int, set[int]]]:
+    """Removals of the fibers ``generated`` that the lay-down log ``log`` does not report, from
+    the snapshots of a lay-down dump (``snapshots``: :func:`dump_snapshots` of ``text``) up to and
     including ``up_to_step``: (the step of the first snapshot without the fiber, fibers), in step
     order. The step is the removal step when the dump interval is the removal check interval
     (the lay-down writes both every check) and an upper bound otherwise. Raises StageError when
-    the log reports a fiber removed that the snapshot of ``up_to_step`` still holds."""
+    the log reports a fiber removed at or before the last of those snapshots that it still holds
+    (the last snapshot may predate ``up_to_step``: a resumed run killed before its first snapshot)."""
     upto = [(s, pos) for s, pos in snapshots if s <= up_to_step]
     if not upto:
         return []
+    logged = removed_fibers(log)
     present = snapshot_fibers(text, upto[-1][1])
-    if present & logged:
-        raise StageError(f"the lay-down log reports fibers {sorted(i + 1 for i in present & logged)} "
+    wrong = present & removed_fibers(log, upto[-1][0])
+    if wrong:
+        raise StageError(f"the lay-down log reports fibers {sorted(i + 1 for i in wrong)} "
                          f"removed, but the snapshot of step {upto[-1][0]} holds them")
     lost = generated - present - logged
     out: list[tuple[int, set[int]]] = []
