@@ -16,8 +16,8 @@ reports:
   (``f_beam[19]``, ``f_beam[20]``: counted since the fix was defined, i.e. over the probe);
 * the largest Newton iterations of one fiber in a step (``f_beam[15]`` at the thermo steps).
 
-``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections) in every
-probe.
+``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections) and
+``--tolerance T`` laydown.newton_tolerance in every probe.
 
 The probes run one after another unless ``--parallel 2`` (then the loop times are loaded: compare
 the iteration counts, which do not depend on the load). Rows are appended to
@@ -77,13 +77,16 @@ def parse_setting(text: str) -> tuple[float, float | None]:
 
 
 def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: float | None,
-                anderson: int = 0) -> str:
+                anderson: int = 0, tolerance: float | None = None) -> str:
     """The lay-down's resumed input with the setting, ``steps`` steps in runs of ``chunk``
-    (``anderson``: laydown.anderson_depth, 0 = the scene's)."""
+    (``anderson``: laydown.anderson_depth, 0 = the scene's; ``tolerance``:
+    laydown.newton_tolerance, None = the scene's)."""
     data = yaml.safe_load((run / "scene.yaml").read_text())
     set_field(data, "laydown.ranks", 1)
     if anderson:
         set_field(data, "laydown.anderson_depth", anderson)
+    if tolerance is not None:
+        set_field(data, "laydown.newton_tolerance", tolerance)
     set_field(data, "laydown.friction_coefficient", mu)
     if stick is not None and mu > 0.0:
         set_field(data, "laydown.friction_stick", stick)
@@ -103,14 +106,15 @@ def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: 
 
 
 def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
-              anderson: int = 0) -> dict[str, Any]:
+              anderson: int = 0, tolerance: float | None = None) -> dict[str, Any]:
     mu, stick = parse_setting(setting)
     work = run / "laydown" / "work"
     restart = work / f"laydown.{step}.restart"
     if not restart.is_file():
         raise SystemExit(f"--step: no restart file {restart}")
     folder = out_root / (f"{run.name}-{step}-mu{mu:g}-k{stick if stick is not None else 'scene'}"
-                         + (f"-aa{anderson}" if anderson else ""))
+                         + (f"-aa{anderson}" if anderson else "")
+                         + (f"-tol{tolerance:g}" if tolerance is not None else ""))
     folder.mkdir(parents=True, exist_ok=True)
     # the generated fibers less those removed up to the restart, as the stage's own resume writes them
     laydown.write_nodes_left(work / NODES_NAME, folder / NODES_NAME,
@@ -123,7 +127,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
             shutil.copyfile(restart, target)
         else:
             target.symlink_to((work / name).resolve())
-    atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick, anderson))
+    atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick, anderson, tolerance))
     fiberdem = build / "bin" / "fiberdem"
     t0 = time.perf_counter()
     proc = subprocess.run([str(fiberdem), "-in", "in.probe", "-log", "log.probe"], cwd=folder,
@@ -133,6 +137,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     rows = [r for r in thermo_rows(log) if r[0] > step]
     row: dict[str, Any] = {"run": str(run), "step": step, "steps": steps, "friction": mu,
                            "friction_stick": stick if mu > 0.0 else None, "anderson": anderson,
+                           "newton_tolerance": tolerance,
                            "exit": proc.returncode,
                            "wall_s": wall, "folder": str(folder), "fiberdem": file_hash(fiberdem)}
     if proc.returncode != 0 or not rows:
@@ -161,6 +166,8 @@ def main() -> int:
                     help="FRICTION:STICK pairs (laydown.friction_coefficient, laydown.friction_stick)")
     ap.add_argument("--anderson", type=int, default=0, choices=range(9), metavar="M",
                     help="laydown.anderson_depth of every probe (0: the run's scene)")
+    ap.add_argument("--tolerance", type=float, default=None, metavar="T",
+                    help="laydown.newton_tolerance of every probe (default: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
     ap.add_argument("--probes", type=Path, default=Path("runs") / "probes")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "friction_probe.json")
@@ -174,7 +181,8 @@ def main() -> int:
     load = os.getloadavg()[0]
     with ThreadPoolExecutor(max_workers=args.parallel) as pool:
         rows = list(pool.map(lambda s: run_probe(args.run, args.step, args.steps, args.chunk, s, build,
-                                                 args.probes, args.anderson), args.settings))
+                                                 args.probes, args.anderson, args.tolerance),
+                                 args.settings))
     for r in rows:
         r["parallel"] = args.parallel
         r["load_average_before"] = load

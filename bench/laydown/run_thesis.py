@@ -129,6 +129,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "loose_dt5": {**LOOSE, "laydown.timestep_s": 5.0e-6, "laydown.friction_stick": 500.0},
     # solver option: Anderson mixing of the Newton corrections over the last 3 (laydown.anderson_depth)
     "loose_aa3": {**LOOSE, "laydown.anderson_depth": 3},
+    # solver option: a 10x looser Newton tolerance (1e-5 of the section radius, 150 pm for a 15 um
+    # radius; the contact law's smallest length is 0.5 nm) with the mixing
+    "loose_tol1e5_aa3": {**LOOSE, "laydown.newton_tolerance": 1.0e-5, "laydown.anderson_depth": 3},
     # issue 15's open question (d): side planes against periodic x/y, both on a piece of whole
     # weave repeats (repeat_piece: the 3 x 3 mm piece is not one), the injected mass scaled by area
     "loose_repeat": {**LOOSE},
