@@ -58,10 +58,23 @@ def test_frictionless_setting_has_no_stick(probe: Any, run: Path) -> None:
 
 def test_anderson_reaches_the_beam_fix(probe: Any, run: Path) -> None:
     """--anderson M puts `anderson M` on fix fiber/beam; without it the keyword is absent."""
-    beam = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0, 3), "fiber/beam")
+    beam = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0, probe.probe_fields(anderson=3)), "fiber/beam")
     assert len(beam) == 1 and " anderson 3" in beam[0], beam
     plain = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0), "fiber/beam")
     assert " anderson " not in plain[0], plain
+
+
+def test_tolerance_and_timestep_reach_the_input(probe: Any, run: Path) -> None:
+    """--tolerance T and --timestep DT reach fix fiber/beam's newton_tol and the timestep command."""
+    fields = probe.probe_fields(tolerance=1e-5, timestep=2e-6)
+    assert fields == {"laydown.newton_tolerance": 1e-5, "laydown.timestep_s": 2e-6}
+    text = probe.probe_input(run, 4000, 300, 50, 0.5, 200.0, fields)
+    beam = fix_lines(text, "fiber/beam")
+    assert " newton_tol 1e-05 " in beam[0] + " ", beam
+    assert any(line.split() == ["timestep", "2e-06"] for line in text.splitlines()), text
+    plain = probe.probe_input(run, 4000, 300, 50, 0.5, 200.0)
+    assert " newton_tol 1e-05 " not in fix_lines(plain, "fiber/beam")[0] + " "
+    assert not any(line.split() == ["timestep", "2e-06"] for line in plain.splitlines())
 
 
 def test_probe_must_fit_the_chunks(probe: Any, run: Path) -> None:

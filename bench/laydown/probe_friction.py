@@ -16,8 +16,11 @@ reports:
   (``f_beam[19]``, ``f_beam[20]``: counted since the fix was defined, i.e. over the probe);
 * the largest Newton iterations of one fiber in a step (``f_beam[15]`` at the thermo steps).
 
-``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections) and
-``--tolerance T`` laydown.newton_tolerance in every probe.
+``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections),
+``--tolerance T`` laydown.newton_tolerance and ``--timestep DT`` laydown.timestep_s in every probe
+(``--steps`` and ``--step`` count steps of the restart's run up to the restart, then of the new
+length; scale the stick factor with the step to keep the friction's damping c_stick = k m / dt,
+docs/bench/laydown.md "Yarn friction").
 
 The probes run one after another unless ``--parallel 2`` (then the loop times are loaded: compare
 the iteration counts, which do not depend on the load). Rows are appended to
@@ -77,16 +80,13 @@ def parse_setting(text: str) -> tuple[float, float | None]:
 
 
 def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: float | None,
-                anderson: int = 0, tolerance: float | None = None) -> str:
+                fields: dict[str, Any] | None = None) -> str:
     """The lay-down's resumed input with the setting, ``steps`` steps in runs of ``chunk``
-    (``anderson``: laydown.anderson_depth, 0 = the scene's; ``tolerance``:
-    laydown.newton_tolerance, None = the scene's)."""
+    (``fields``: further scene fields, e.g. laydown.anderson_depth, by dotted path)."""
     data = yaml.safe_load((run / "scene.yaml").read_text())
     set_field(data, "laydown.ranks", 1)
-    if anderson:
-        set_field(data, "laydown.anderson_depth", anderson)
-    if tolerance is not None:
-        set_field(data, "laydown.newton_tolerance", tolerance)
+    for path, value in (fields or {}).items():
+        set_field(data, path, value)
     set_field(data, "laydown.friction_coefficient", mu)
     if stick is not None and mu > 0.0:
         set_field(data, "laydown.friction_stick", stick)
@@ -105,8 +105,21 @@ def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: 
     return "\n".join(lines) + "\n"
 
 
+def probe_fields(anderson: int = 0, tolerance: float | None = None,
+                 timestep: float | None = None) -> dict[str, Any]:
+    """The scene fields of the options --anderson, --tolerance, --timestep (only those given)."""
+    out: dict[str, Any] = {}
+    if anderson:
+        out["laydown.anderson_depth"] = anderson
+    if tolerance is not None:
+        out["laydown.newton_tolerance"] = tolerance
+    if timestep is not None:
+        out["laydown.timestep_s"] = timestep
+    return out
+
+
 def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
-              anderson: int = 0, tolerance: float | None = None) -> dict[str, Any]:
+              anderson: int = 0, tolerance: float | None = None, timestep: float | None = None) -> dict[str, Any]:
     mu, stick = parse_setting(setting)
     work = run / "laydown" / "work"
     restart = work / f"laydown.{step}.restart"
@@ -114,7 +127,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
         raise SystemExit(f"--step: no restart file {restart}")
     folder = out_root / (f"{run.name}-{step}-mu{mu:g}-k{stick if stick is not None else 'scene'}"
                          + (f"-aa{anderson}" if anderson else "")
-                         + (f"-tol{tolerance:g}" if tolerance is not None else ""))
+                         + (f"-tol{tolerance:g}" if tolerance is not None else "")
+                         + (f"-dt{timestep:g}" if timestep is not None else ""))
     folder.mkdir(parents=True, exist_ok=True)
     # the generated fibers less those removed up to the restart, as the stage's own resume writes them
     laydown.write_nodes_left(work / NODES_NAME, folder / NODES_NAME,
@@ -127,7 +141,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
             shutil.copyfile(restart, target)
         else:
             target.symlink_to((work / name).resolve())
-    atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick, anderson, tolerance))
+    atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick,
+                                                               probe_fields(anderson, tolerance, timestep)))
     fiberdem = build / "bin" / "fiberdem"
     t0 = time.perf_counter()
     proc = subprocess.run([str(fiberdem), "-in", "in.probe", "-log", "log.probe"], cwd=folder,
@@ -137,7 +152,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     rows = [r for r in thermo_rows(log) if r[0] > step]
     row: dict[str, Any] = {"run": str(run), "step": step, "steps": steps, "friction": mu,
                            "friction_stick": stick if mu > 0.0 else None, "anderson": anderson,
-                           "newton_tolerance": tolerance,
+                           "newton_tolerance": tolerance, "timestep_s": timestep,
                            "exit": proc.returncode,
                            "wall_s": wall, "folder": str(folder), "fiberdem": file_hash(fiberdem)}
     if proc.returncode != 0 or not rows:
@@ -168,6 +183,8 @@ def main() -> int:
                     help="laydown.anderson_depth of every probe (0: the run's scene)")
     ap.add_argument("--tolerance", type=float, default=None, metavar="T",
                     help="laydown.newton_tolerance of every probe (default: the run's scene)")
+    ap.add_argument("--timestep", type=float, default=None, metavar="DT",
+                    help="laydown.timestep_s of every probe (default: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
     ap.add_argument("--probes", type=Path, default=Path("runs") / "probes")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "friction_probe.json")
@@ -181,7 +198,7 @@ def main() -> int:
     load = os.getloadavg()[0]
     with ThreadPoolExecutor(max_workers=args.parallel) as pool:
         rows = list(pool.map(lambda s: run_probe(args.run, args.step, args.steps, args.chunk, s, build,
-                                                 args.probes, args.anderson, args.tolerance),
+                                                 args.probes, args.anderson, args.tolerance, args.timestep),
                                  args.settings))
     for r in rows:
         r["parallel"] = args.parallel
