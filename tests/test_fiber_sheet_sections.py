@@ -14,7 +14,7 @@ import yaml
 from fiberform.fabric_geometry import segment_closest_differences, segment_distances
 from fiberform.fiber_io import quat_from_frames, quat_rotate
 from fiberform.fiber_sheet import (
-    fiber_fiber_gap, frame_fibers, frame_quaternions, node_dump_columns, rect_extent,
+    element_clearance, fiber_fiber_gap, frame_fibers, frame_quaternions, node_dump_columns, rect_extent,
 )
 from fiberform.scene import parse_scene
 
@@ -189,9 +189,60 @@ def brute_gap(x: np.ndarray, offsets: np.ndarray, radius: np.ndarray, axes: np.n
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_pruned_gap_equals_every_pair(seed: int) -> None:
-    """450 elements (two chunks): the candidate pruning finds the smallest gap of all pairs."""
+    """450 elements: the k-d tree search finds the smallest gap of all pairs."""
     args = random_sheet(np.random.default_rng(seed), 50, 10, rect=True)
     assert fiber_fiber_gap(*args) == pytest.approx(brute_gap(*args), abs=1e-18)
+
+
+def brute_periodic_gap(x: np.ndarray, offsets: np.ndarray, radius: np.ndarray, period: tuple[float, float]) -> float:
+    """Circles, periodic x/y: every element pair of different fibers, B at the image whose midpoint
+    is closest to A's."""
+    owner = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets) - 1)
+    el = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])])
+    a, b = np.meshgrid(el, el, indexing="ij")
+    diff = 0.5 * (x[b] + x[b + 1]) - 0.5 * (x[a] + x[a + 1])
+    sh = np.zeros_like(diff)
+    for k in (0, 1):
+        sh[..., k] = -np.round(diff[..., k] / period[k]) * period[k]
+    dist = segment_distances(x[a], x[a + 1], x[b] + sh, x[b + 1] + sh)
+    gap = dist - np.maximum(radius[a], radius[a + 1]) - np.maximum(radius[b], radius[b + 1])
+    return float(np.min(gap[owner[:, None] != owner[None, :]]))
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_periodic_gap_equals_every_pair(seed: int) -> None:
+    """Periodic x/y (chains reaching out of the 200 x 200 um box): the k-d tree search with its
+    minimal images finds the smallest gap of all pairs at their closest images."""
+    x, offsets, r, _, _ = random_sheet(np.random.default_rng(seed), 40, 8, rect=False)
+    period = (200e-6, 200e-6)
+    assert fiber_fiber_gap(x, offsets, r, period=period) == pytest.approx(
+        brute_periodic_gap(x, offsets, r, period), abs=1e-18)
+
+
+def test_far_apart_fibers_give_their_exact_gap() -> None:
+    """Two short fibers 1 mm apart (far beyond the first search radius): the search radius grows
+    until the gap is certain, the value is the closed form."""
+    x = np.array([[0.0, 0.0, 0.0], [10e-6, 0.0, 0.0], [20e-6, 0.0, 0.0],
+                  [0.0, 1e-3, 0.0], [10e-6, 1e-3, 0.0], [20e-6, 1e-3, 0.0]])
+    r = np.full(6, 10e-6)
+    assert fiber_fiber_gap(x, np.array([0, 3, 6]), r) == pytest.approx(1e-3 - 20e-6, rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_clearance_equals_every_pair(seed: int) -> None:
+    """Element-yarn clearance: the k-d tree search equals the minimum over every element and yarn
+    segment (random fibers among random yarn polylines)."""
+    rng = np.random.default_rng(seed)
+    x, offsets, _, _, _ = random_sheet(rng, 30, 8, rect=False)
+    ypts = np.vstack([np.linspace(rng.uniform(0, 200e-6, 3), rng.uniform(0, 200e-6, 3), 12) for _ in range(6)])
+    yoff = np.arange(0, 6 * 12 + 1, 12)
+    yrad = rng.uniform(5e-6, 30e-6, 6)
+    el = np.concatenate([np.arange(lo, hi - 1) for lo, hi in zip(offsets[:-1], offsets[1:])])
+    sa = np.vstack([ypts[yoff[k]:yoff[k + 1] - 1] for k in range(6)])
+    sb = np.vstack([ypts[yoff[k] + 1:yoff[k + 1]] for k in range(6)])
+    sr = np.repeat(yrad, 11)
+    brute = float(np.min(segment_distances(x[el][:, None], x[el + 1][:, None], sa[None], sb[None]) - sr[None]))
+    assert element_clearance(x, offsets, ypts, yoff, yrad) == pytest.approx(brute, abs=1e-18)
 
 
 def test_circular_fibers_give_the_same_gap_as_before() -> None:
