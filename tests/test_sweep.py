@@ -62,6 +62,8 @@ def test_two_values_by_two_seeds(tmp_path: Path) -> None:
     (["--seeds", "0"], "--seeds"),
     (["--to", "lay-down"], "--to 'lay-down'"),
     (["--set", "fibers.length_m=1.0e-3;rm,2.0e-3"], "fibers.length_m"),
+    (["--jobs", "0"], "--jobs"),
+    (["--jobs", "2", "--submit", "slurm"], "--jobs"),
 ])
 def test_bad_sweep_exits_2_and_writes_nothing(tmp_path: Path, args: list[str], words: str) -> None:
     (tmp_path / "s.yaml").write_text(SCENE)
@@ -69,6 +71,29 @@ def test_bad_sweep_exits_2_and_writes_nothing(tmp_path: Path, args: list[str], w
     assert r.returncode == 2, r.stdout + r.stderr
     assert words in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.yaml"]
+
+
+def test_jobs_run_variants_at_once_with_the_same_results(tmp_path: Path) -> None:
+    """``--jobs 2``: 3 variants, two at a time (both first variants start before any ends), each
+    with its output in <sweep dir>/scenes/<variant>.log; the fibers equal those of the same sweep
+    run one variant after the other."""
+    seq, par = tmp_path / "seq", tmp_path / "par"
+    for d in (seq, par):
+        d.mkdir()
+        (d / "s.yaml").write_text(SCENE)
+    r = _ff(seq, "sweep", "s.yaml", "--seeds", "3")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    r = _ff(par, "sweep", "s.yaml", "--seeds", "3", "--jobs", "2")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    events = [ln for ln in r.stdout.splitlines() if " started " in ln or " done in " in ln]
+    assert len(events) == 6 and all(" started " in ln for ln in events[:2]), events
+    rec = json.loads((par / "runs" / "sw-sweep" / "sweep.json").read_text())
+    for v in rec["variants"]:
+        log = par / "runs" / "sw-sweep" / "scenes" / f"{v['name']}.log"
+        assert "generate" in log.read_text(), log
+        with h5py.File(seq / v["output_dir"] / "fibers" / "fibers.h5") as a, \
+                h5py.File(par / v["output_dir"] / "fibers" / "fibers.h5") as b:
+            assert np.array_equal(a["fibers/x"][...], b["fibers/x"][...])
 
 
 def test_collect_without_a_sweep_exits_2(tmp_path: Path) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 from collections.abc import Callable, Sequence
@@ -206,7 +207,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import expand, parse_set, run_sweep, submit_sweep, variant_path, write_sweep
 
     opts = None
+    if not 1 <= args.jobs <= 64:
+        raise ConfigError(f"--jobs {args.jobs}: variants at once must lie in [1, 64]")
     if args.submit is not None:
+        if args.jobs > 1:
+            raise ConfigError("--jobs: only without --submit (the scheduler runs the job arrays' tasks at once)")
         if args.no_run:
             raise ConfigError("--no-run: not with --submit (--dry-run writes the scripts without submitting)")
         opts = executors.batch_options(args.submit, partition=args.partition, account=args.account,
@@ -235,8 +240,16 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     print(f"sweep: {len(files)} variant(s) in {sweep_dir} (record {sweep_dir / 'sweep.json'})")
     if args.no_run:
         return 0
+    if args.jobs > 1:
+        from .sweep import variant_ranks
+
+        ranks, cores = variant_ranks(files, Path(args.build_dir), args.start, args.stop), os.cpu_count() or 1
+        if args.jobs * ranks > cores:
+            print(f"fiberform sweep: warning: --jobs {args.jobs} x {ranks} MPI rank(s) per variant > {cores} "
+                  "cores: the variants will share cores (MPI ranks that wait for each other slow down badly)",
+                  file=sys.stderr)
     failed = run_sweep(files, Path(args.build_dir), args.start, args.stop,
-                       lambda line: print(line, flush=True))
+                       lambda line: print(line, flush=True), jobs=args.jobs)
     if failed:
         print(f"fiberform: error: {len(failed)} variant(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
@@ -386,6 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="start", metavar="STAGE", help="as for run")
     p.add_argument("--to", dest="stop", metavar="STAGE", help="as for run (e.g. --to laydown)")
     p.add_argument("--no-run", action="store_true", help="write the variants and sweep.json only")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="run up to N variants at once on this machine (each as `fiberform run`, output "
+                   "in <sweep dir>/scenes/<variant>.log; default 1: one after the other); 1-64")
     p.add_argument("--submit", metavar="SCHEDULER", choices=executors.SCHEDULERS,
                    help="instead of running the variants here, submit one job array per stage to slurm "
                    "(sbatch --array, aftercorr between stages) or pbs (qsub -J, afterok); scripts in "

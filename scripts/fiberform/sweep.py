@@ -8,7 +8,8 @@ validated like any scene before anything is written; ``<sweep dir>/sweep.json`` 
 scene (path and hash), the grid and every variant (file, output folder, seed, values). The sweep
 dir is ``<base output_dir>-sweep``. Variants then run one after the other through the stage graph
 (:func:`fiberform.pipeline.run_pipeline`), each skipped stage by stage when up to date, so a sweep is
-resumed by running the same command again. ``fiberform collect SWEEP_DIR`` reads each variant's
+resumed by running the same command again; with ``--jobs N`` up to N variants run at once, each as
+its own ``fiberform run`` process writing ``<sweep dir>/scenes/<name>_<k>.log`` (:func:`run_sweep`). ``fiberform collect SWEEP_DIR`` reads each variant's
 key results (:meth:`Stage.metrics`) and stage wall times into ``collect.csv`` and ``collect.png``.
 """
 
@@ -19,7 +20,11 @@ import io
 import itertools
 import json
 import math
+import os
 import shutil
+import subprocess
+import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -158,10 +163,22 @@ def write_sweep(base_path: Path, sweep_dir: Path, variants: Sequence[Variant],
     return files
 
 
+def variant_ranks(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None) -> int:
+    """The most MPI ranks any selected stage of any variant runs on (Stage.ranks)."""
+    most = 1
+    for f in files:
+        ctx = StageContext(scene=load_scene(f), scene_path=f, build_dir=build_dir)
+        stages, _ = plan_run(ctx, start, stop, None, require_upstream=False)
+        most = max([most] + [st.ranks(ctx) for st in stages])
+    return most
+
+
 def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
-              echo: Callable[[str], None]) -> list[str]:
+              echo: Callable[[str], None], jobs: int = 1) -> list[str]:
     """Run each variant's pipeline; returns the names of the variants that failed (the others
-    still run)."""
+    still run). ``jobs`` > 1: up to that many variants at once (:func:`_run_concurrently`)."""
+    if jobs > 1 and len(files) > 1:
+        return _run_concurrently(files, build_dir, start, stop, echo, jobs)
     failed = []
     for i, f in enumerate(files, 1):
         echo(f"== variant {i}/{len(files)}: {f} ==")
@@ -174,6 +191,56 @@ def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: s
             echo(f"variant {f.stem} FAILED: {exc}")
             failed.append(f.stem)
     return failed
+
+
+def _run_concurrently(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
+                      echo: Callable[[str], None], jobs: int) -> list[str]:
+    """Up to ``jobs`` variants at once, each as ``fiberform run SCENE`` (with --from/--to) in a
+    process of its own, its output in the scene file's ``.log``; a line when each starts and
+    ends. On SIGTERM or Ctrl-C (Terminated, KeyboardInterrupt) the running variants get SIGTERM
+    (each stops its programs and records its stage as failed, as `fiberform run` does) and the
+    exception goes on."""
+    cmd0 = [sys.executable, "-m", "fiberform", "run", "--build-dir", str(build_dir)]
+    cmd0 += (["--from", start] if start else []) + (["--to", stop] if stop else [])
+    env = dict(os.environ)
+    here = str(Path(__file__).resolve().parents[1])  # the package's parent: importable in the child
+    env["PYTHONPATH"] = here + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    queue = list(enumerate(files, 1))
+    running: dict[subprocess.Popen[bytes], tuple[int, Path, float]] = {}
+    failed: list[str] = []
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                i, f = queue.pop(0)
+                log = f.with_suffix(".log")
+                with open(log, "wb") as out:
+                    proc = subprocess.Popen([*cmd0, str(f)], stdout=out, stderr=subprocess.STDOUT, env=env)
+                running[proc] = (i, f, time.monotonic())
+                echo(f"== variant {i}/{len(files)}: {f} started (output: {log}) ==")
+            done = [p for p in running if p.poll() is not None]
+            if not done:
+                time.sleep(0.5)
+                continue
+            for proc in done:
+                i, f, t0 = running.pop(proc)
+                wall = time.monotonic() - t0
+                if proc.returncode == 0:
+                    echo(f"variant {i}/{len(files)} {f.stem} done in {wall:.0f} s")
+                else:
+                    tail = f.with_suffix(".log").read_text(errors="replace").strip().splitlines()[-3:]
+                    echo(f"variant {f.stem} FAILED (exit {proc.returncode} after {wall:.0f} s; "
+                         f"{f.with_suffix('.log')}): " + " | ".join(tail))
+                    failed.append(f.stem)
+    except BaseException:
+        for proc in running:
+            proc.terminate()
+        for proc in running:
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        raise
+    return sorted(failed, key=[f.stem for f in files].index)
 
 
 def variant_path(sweep_dir: Path, v: Variant) -> Path:
