@@ -12,7 +12,8 @@ campaign, each laid-down sheet is then pressed a second time, to that pressure
 differs from the point's only in ``press``; its sweep takes over each seed's finished generate,
 fabric, flow, lay-down and permeability folders, so nothing is laid down twice, and runs the press
 and the pressed permeability). Finished stages are skipped, so the same command resumes the
-campaign. ``--submit slurm|pbs`` submits each sweep as job arrays instead; the pressure presses of
+campaign. ``--jobs N`` runs up to N seeds of a point at once on this machine (``fiberform sweep
+--jobs``). ``--submit slurm|pbs`` submits each sweep as job arrays instead; the pressure presses of
 a point can only be submitted once its sweep has finished the lay-downs and permeabilities (they
 are copied, not awaited by a job dependency): run the same command again then (and without
 --submit, or with --collect-only, once everything is done).
@@ -100,6 +101,8 @@ def _main() -> int:
     ap.add_argument("--sections", type=_csv_list, help="comma list: circular, rectangular; default both")
     ap.add_argument("--seeds", type=int, help="seeds per point (default: the campaign's)")
     ap.add_argument("--submit", choices=("slurm", "pbs"), help="submit job arrays instead of running here")
+    ap.add_argument("--jobs", type=int, default=1, metavar="N",
+                    help="seeds of a point run at once on this machine (fiberform sweep --jobs; not with --submit)")
     ap.add_argument("--collect-only", action="store_true", help="run nothing; tabulate what has finished")
     ap.add_argument("--out", type=Path, help="results JSON (default bench/thesis/results/campaign[-reduced].json)")
     args = ap.parse_args()
@@ -121,6 +124,9 @@ def _main() -> int:
     seeds = args.seeds or (c.reduced.seeds if args.reduced else c.seeds)
     if not 1 <= seeds <= 100:
         print(f"--seeds {seeds}: allowed 1..100", file=sys.stderr)
+        return 2
+    if not 1 <= args.jobs <= 64 or (args.jobs > 1 and args.submit):
+        print(f"--jobs {args.jobs}: allowed 1..64, and only without --submit", file=sys.stderr)
         return 2
     fiberform = [sys.executable, "-m", "fiberform"]
     build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
@@ -158,6 +164,8 @@ def _main() -> int:
             cmd = [*fiberform, "sweep", str(scene_path), "--seeds", str(seeds), "--build-dir", str(build)]
             if args.submit:
                 cmd += ["--submit", args.submit]
+            elif args.jobs > 1:
+                cmd += ["--jobs", str(args.jobs)]
             print(f"== {group}: fiberform {' '.join(cmd[3:])}", flush=True)
             t0 = time.monotonic()
             proc = subprocess.run(cmd)
@@ -170,7 +178,7 @@ def _main() -> int:
                   f"{groups[group]}", flush=True)
             try:
                 pr = cp.run_pressure_sweep(scene_path, pressure_path, seeds, build,
-                                           lambda line: print(line, flush=True), opts)
+                                           lambda line: print(line, flush=True), opts, jobs=args.jobs)
             except FiberformError as exc:
                 failures[f"{group}-pressure"] = str(exc)
                 continue

@@ -265,7 +265,8 @@ class PressureSweep:
 
 
 def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_dir: Path,
-                       echo: Callable[[str], None], submit: BatchOptions | None = None) -> PressureSweep:
+                       echo: Callable[[str], None], submit: BatchOptions | None = None,
+                       jobs: int = 1) -> PressureSweep:
     """The second press of every seed of a point: the sweep of ``pressure_path`` (scene files and
     sweep.json as ``fiberform sweep PRESSURE --seeds N``), each variant's :data:`REUSED_STAGES`
     adopted from the variant of ``fiberform sweep POINT --seeds N`` with the same seed
@@ -306,7 +307,8 @@ def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_
                      echo=echo)
         out.started, out.submitted = [v.name for v in variants], True
         return out
-    out.failed = run_sweep([variant_path(sweep_dir, v) for v in ready], build_dir, "press", None, echo)
+    out.failed = run_sweep([variant_path(sweep_dir, v) for v in ready], build_dir, "press", None, echo,
+                           jobs=jobs)
     out.started = [v.name for v in ready]
     return out
 
