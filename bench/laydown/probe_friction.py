@@ -119,7 +119,8 @@ def probe_fields(anderson: int = 0, tolerance: float | None = None,
 
 
 def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
-              anderson: int = 0, tolerance: float | None = None, timestep: float | None = None) -> dict[str, Any]:
+              anderson: int = 0, tolerance: float | None = None,
+              timestep: float | None = None) -> dict[str, Any]:
     mu, stick = parse_setting(setting)
     work = run / "laydown" / "work"
     restart = work / f"laydown.{step}.restart"

@@ -9,8 +9,9 @@ scene (path and hash), the grid and every variant (file, output folder, seed, va
 dir is ``<base output_dir>-sweep``. Variants then run one after the other through the stage graph
 (:func:`fiberform.pipeline.run_pipeline`), each skipped stage by stage when up to date, so a sweep is
 resumed by running the same command again; with ``--jobs N`` up to N variants run at once, each as
-its own ``fiberform run`` process writing ``<sweep dir>/scenes/<name>_<k>.log`` (:func:`run_sweep`). ``fiberform collect SWEEP_DIR`` reads each variant's
-key results (:meth:`Stage.metrics`) and stage wall times into ``collect.csv`` and ``collect.png``.
+its own ``fiberform run`` process writing ``<sweep dir>/scenes/<name>_<k>.log`` (:func:`run_sweep`).
+``fiberform collect SWEEP_DIR`` reads each variant's key results (:meth:`Stage.metrics`) and stage
+wall times into ``collect.csv`` and ``collect.png``.
 """
 
 from __future__ import annotations
