@@ -40,6 +40,20 @@ TOL_RESUME = 1e-9  # m: the resumed run repeats the uninterrupted one (restart f
 TOL_RANKS = 1e-9   # m (measured: identical; each fiber is solved whole on one rank)
 
 
+def write_four_fibers(path: Path) -> None:
+    """A nodes file of 4 fibers (IDs 1-4) of 2 nodes each: atom fiber node count ..."""
+    path.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
+                                            for f in range(4) for k in range(2)))
+
+
+def snapshot(step: int, fibers: list[int]) -> str:
+    """A dump snapshot of the 2-node fibers ``fibers`` (1-based IDs) of :func:`write_four_fibers`."""
+    rows = [f"{2 * (f - 1) + k + 1} 1e-12 0 0 0 {f} {k}" for f in fibers for k in range(2)]
+    return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(rows)}\n"
+            "ITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\nITEM: ATOMS id mass x y z f_beam[1] f_beam[2]\n"
+            + "".join(r + "\n" for r in rows))
+
+
 def _scene(work: Path, out: str, ranks: int) -> Path:
     p = work / f"{out}.yaml"
     p.write_text(SCENE % {"out": out, "ranks": ranks})
@@ -162,9 +176,7 @@ def test_resume_after_a_removal_lists_only_the_fibers_left(tmp_path: Path) -> No
     work = tmp_path / "work"
     work.mkdir()
     src = tmp_path / "fibers.nodes"
-    # 4 fibers (IDs 1-4) of 2 nodes each: atom fiber node count ...
-    src.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
-                                          for f in range(4) for k in range(2)))
+    write_four_fibers(src)
     (work / "traj.dump").write_text("")
     (work / LOG_NAME).write_text("fix fiber/remove: step 1000 removed fiber(s) 2\n"
                                  "fix fiber/remove: step 3000 removed fiber(s) 4\n")
@@ -188,14 +200,7 @@ def test_resume_recovers_a_removal_the_log_lost(tmp_path: Path) -> None:
     work = tmp_path / "work"
     work.mkdir()
     src = tmp_path / "fibers.nodes"
-    src.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
-                                          for f in range(4) for k in range(2)))
-
-    def snapshot(step: int, fibers: list[int]) -> str:
-        rows = [f"{2 * (f - 1) + k + 1} 1e-12 0 0 0 {f} {k}" for f in fibers for k in range(2)]
-        return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(rows)}\n"
-                "ITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\nITEM: ATOMS id mass x y z f_beam[1] f_beam[2]\n"
-                + "".join(r + "\n" for r in rows))
+    write_four_fibers(src)
 
     dump = (snapshot(0, [1, 2, 3, 4]) + snapshot(1000, [1, 3, 4]) + snapshot(2000, [1, 3, 4])
             + snapshot(3000, [1, 4]) + snapshot(4000, [1]))
@@ -234,14 +239,7 @@ def test_a_resume_killed_before_its_first_snapshot_resumes_again(tmp_path: Path)
     work = tmp_path / "work"
     work.mkdir()
     src = tmp_path / "fibers.nodes"
-    src.write_text("# header\n" + "".join(f"{2 * f + k + 1} {f + 1} {k} 2 1e-5 1e-5 0 0\n"
-                                          for f in range(4) for k in range(2)))
-
-    def snapshot(step: int, fibers: list[int]) -> str:
-        rows = [f"{2 * (f - 1) + k + 1} 1e-12 0 0 0 {f} {k}" for f in fibers for k in range(2)]
-        return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(rows)}\n"
-                "ITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\nITEM: ATOMS id mass x y z f_beam[1] f_beam[2]\n"
-                + "".join(r + "\n" for r in rows))
+    write_four_fibers(src)
 
     hashes = {"scene": "sha256:1"}
     (work / RESUME_STATE).write_text(json.dumps(hashes))

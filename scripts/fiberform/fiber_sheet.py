@@ -504,6 +504,8 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None 
         i, j = _near_pairs(mid, None, bound + max(c, 0.0), period)
         keep = owner[i] != owner[j]
         i, j = i[keep], j[keep]
+        if len(i) == 0:
+            return math.inf
         out = math.inf
         for k in np.array_split(np.arange(len(i)), max(1, len(i) // 200_000)):
             ik, jk = i[k], j[k]
@@ -511,9 +513,7 @@ def fiber_fiber_gap(x: Array, offsets: Array, radius: Array, axes: Array | None 
             d = segment_closest_differences(p0[ik], p1[ik], p0[jk] + sh, p1[jk] + sh)
             dist = np.linalg.norm(d, axis=-1)
             n = d / np.where(dist > 0.0, dist, 1.0)[:, None]
-            gap = dist - extent(ik, n) - extent(jk, n)
-            if len(gap):
-                out = min(out, float(np.min(gap)))
+            out = min(out, float(np.min(dist - extent(ik, n) - extent(jk, n))))
         return out
 
     return _growing_search(max(2.0 * float(np.max(hi_e)), 1e-9), limit, pairs_min)

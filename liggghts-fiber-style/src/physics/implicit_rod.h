@@ -1014,21 +1014,21 @@ class Stepper {
     // G^T Z: entry (a, b) is non-zero only where a node of column a lies on a fiber that column
     // b's z covers, so each a visits only the columns listed on its nodes' fibers (the same sums
     // in the same order as over all b: the other entries are exact zeros)
-    by_fiber_.assign(static_cast<std::size_t>(n), {});
+    if (by_fiber_.size() < static_cast<std::size_t>(n)) by_fiber_.resize(static_cast<std::size_t>(n));
+    for (int k = 0; k < n; ++k) by_fiber_[static_cast<std::size_t>(k)].clear();  // keeps their storage
     for (std::size_t b = 0; b < m; ++b)
       for (int r = 0; r < tg_.cols[b].nr; ++r) by_fiber_[static_cast<std::size_t>(tg_.cols[b].lo[r])].push_back(b);
     seen_.assign(m, m);
-    std::vector<std::size_t> near;
     for (std::size_t a = 0; a < m; ++a) {
       tg_.cap[a * m + a] = kinv[a];
-      near.clear();
+      near_.clear();
       for (int i = 0; i < 4; ++i)
         for (std::size_t b : by_fiber_[static_cast<std::size_t>(flo_[tg_.cols[a].node[i]])])
           if (seen_[b] != a) {
             seen_[b] = a;
-            near.push_back(b);
+            near_.push_back(b);
           }
-      for (std::size_t b : near) {
+      for (std::size_t b : near_) {
         double v = 0.0;
         for (int i = 0; i < 4; ++i)
           for (int d = 0; d < 3; ++d) v += tg_.cols[a].u[3 * i + d] * tg_.cols[b].zval(tg_.cols[a].node[i], d);
@@ -1063,7 +1063,7 @@ class Stepper {
   std::vector<double> tw_, ty_;
   std::vector<int> flo_, fhi_;
   std::vector<std::vector<std::size_t>> by_fiber_;  // build_couplings: columns by fiber (first node)
-  std::vector<std::size_t> seen_;
+  std::vector<std::size_t> seen_, near_;
 
   std::vector<std::vector<Node>> starts_;  // state at the start of the (sub-)step of each halving level
   const std::vector<NodeForceModel *> *models_ = nullptr;
