@@ -232,11 +232,132 @@ void test_friction(double at_over_an, double stick = StaticContactModel::kStick)
               mu, stick, dx, T);
 }
 
+// gap_node_gradient: the gradient of a gap between two elements' centre lines with respect to the
+// four node positions, the closest points moving with the nodes, against central differences of the
+// gap with the closest points recomputed. Rectangles (a1 16 um, a2 4 um): crossing ribbons whose
+// centre-line direction leaves a face at an angle (both parameters inside), a pair with one
+// parameter at an end, a near-parallel pair (10 degrees); a ribbon element against a yarn segment
+// (static: its two rows unused). The extents are taken about the elements' chords at the base
+// positions in the differences (gap_node_gradient leaves out the chords' turning, as the force
+// models do); the full difference is then compared with the gradient before this term
+// (the lever weights times the unit gradient at fixed points). Circles: the weights times n.
+void test_gap_gradient() {
+  const double a1 = 16e-6, a2 = 4e-6, R = 50e-6;
+  const Vec3 t2[4] = {{0.1, 0.05, 1.0}, {0.05, 0.1, 1.0}, {-0.2, 0.1, 1.0}, {-0.1, 0.2, 1.0}};
+  // the gap with the element axes held at `axA`, `axB` (unit; zero: each element's own chord)
+  auto gap = [&](const Vec3 x[4], bool rect, bool yarn, Vec3 axA, Vec3 axB, Vec3 *grad, double *sp = nullptr,
+                 double *tp = nullptr) {
+    double s, t;
+    closest_params_segment_segment(x[0], x[1], x[2], x[3], s, t);
+    if (sp) *sp = s;
+    if (tp) *tp = t;
+    const Vec3 d = lerp(x[0], x[1], s) - lerp(x[2], x[3], t);
+    const double dist = norm(d);
+    const Vec3 n = (1.0 / dist) * d;
+    auto extent = [&](int i, Vec3 ax, Vec3 *de) {
+      if (!rect) {
+        *de = Vec3{0, 0, 0};
+        return 10e-6;
+      }
+      const Vec3 a = norm(ax) > 0 ? ax : (1.0 / norm(x[i + 1] - x[i])) * (x[i + 1] - x[i]);
+      return rect_extent(a, t2[i] + t2[i + 1], a1, a2, n, de);
+    };
+    Vec3 deA, deB;
+    const double eA = extent(0, axA, &deA);
+    double eB = R;
+    deB = Vec3{0, 0, 0};
+    if (!yarn) eB = extent(2, axB, &deB);
+    if (grad) gap_node_gradient(x[0], x[1], x[2], x[3], s, t, d, gap_gradient(n, dist, deA + deB), grad);
+    return dist - eA - eB;
+  };
+  struct Case {
+    const char *name;
+    Vec3 x[4];
+    bool rect, yarn;
+  };
+  const Case cases[] = {
+      {"ribbons crossing, tilted", {{-30e-6, -2e-6, 14e-6}, {32e-6, 3e-6, 11e-6}, {1e-6, -28e-6, 0}, {-4e-6, 33e-6, 3e-6}}, true, false},
+      {"ribbons, one end", {{12e-6, -2e-6, 13e-6}, {60e-6, 3e-6, 16e-6}, {1e-6, -28e-6, 0}, {-4e-6, 33e-6, 3e-6}}, true, false},
+      {"ribbons near-parallel", {{-30e-6, 1e-6, 9e-6}, {30e-6, 3e-6, 10e-6}, {-29e-6, -5e-6, 0}, {29e-6, 6e-6, 1e-6}}, true, false},
+      {"ribbon on a yarn", {{-30e-6, -2e-6, 58e-6}, {32e-6, 3e-6, 55e-6}, {1e-6, -300e-6, 0}, {-4e-6, 330e-6, 3e-6}}, true, true},
+      {"circles crossing", {{-30e-6, -2e-6, 24e-6}, {32e-6, 3e-6, 21e-6}, {1e-6, -28e-6, 0}, {-4e-6, 33e-6, 3e-6}}, false, false},
+  };
+  for (const Case &c : cases) {
+    const Vec3 axA = (1.0 / norm(c.x[1] - c.x[0])) * (c.x[1] - c.x[0]);
+    const Vec3 axB = (1.0 / norm(c.x[3] - c.x[2])) * (c.x[3] - c.x[2]);
+    Vec3 g[4];
+    double s, t;
+    gap(c.x, c.rect, c.yarn, axA, axB, g, &s, &t);
+    const int rows = c.yarn ? 2 : 4;
+    const double eps = 1e-11;
+    double worst = 0.0, scale = 0.0, worst_full = 0.0, worst_old = 0.0;
+    // the gradient before: the weights times the unit gradient at fixed points
+    Vec3 old[4];
+    {
+      const Vec3 d = lerp(c.x[0], c.x[1], s) - lerp(c.x[2], c.x[3], t);
+      const double dist = norm(d);
+      const Vec3 n = (1.0 / dist) * d;
+      Vec3 deA{0, 0, 0}, deB{0, 0, 0};
+      if (c.rect) rect_extent(axA, t2[0] + t2[1], a1, a2, n, &deA);
+      if (c.rect && !c.yarn) rect_extent(axB, t2[2] + t2[3], a1, a2, n, &deB);
+      const Vec3 u = gap_gradient_dir(n, dist, deA + deB);
+      const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
+      for (int k = 0; k < 4; ++k) old[k] = w[k] * u;
+    }
+    for (int k = 0; k < rows; ++k)
+      for (int i = 0; i < 3; ++i) {
+        Vec3 xp[4] = {c.x[0], c.x[1], c.x[2], c.x[3]}, xm[4] = {c.x[0], c.x[1], c.x[2], c.x[3]};
+        xp[k][i] += eps;
+        xm[k][i] -= eps;
+        const double fd = (gap(xp, c.rect, c.yarn, axA, axB, nullptr) - gap(xm, c.rect, c.yarn, axA, axB, nullptr)) / (2 * eps);
+        const double fd_full = (gap(xp, c.rect, c.yarn, Vec3{}, Vec3{}, nullptr) - gap(xm, c.rect, c.yarn, Vec3{}, Vec3{}, nullptr)) / (2 * eps);
+        worst = std::max(worst, std::fabs(fd - g[k][i]));
+        worst_full = std::max(worst_full, std::fabs(fd_full - g[k][i]));
+        worst_old = std::max(worst_old, std::fabs(fd_full - old[k][i]));
+        scale = std::max(scale, std::fabs(g[k][i]));
+      }
+    std::printf("gap gradient, %s (s %.3f, t %.3f): |grad| %.3f, central differences %.1e (chords held), %.1e "
+                "(chords turning; the weights times the unit gradient: %.1e)\n",
+                c.name, s, t, scale, worst, worst_full, worst_old);
+    expect(worst < 1e-4 * scale, "gap gradient = central differences (chords held)", worst, 0.0);
+    if (!c.rect) {
+      const Vec3 d = lerp(c.x[0], c.x[1], s) - lerp(c.x[2], c.x[3], t);
+      const Vec3 n = (1.0 / norm(d)) * d;
+      const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
+      double dev = 0.0;
+      for (int k = 0; k < 4; ++k) dev = std::max(dev, norm(g[k] - w[k] * n));
+      expect(dev < 1e-12, "circles: the lever weights times n", dev, 0.0);
+    }
+    if (c.rect && !c.yarn && s > 0 && s < 1 && t > 0 && t < 1)
+      expect(worst_full < 0.2 * worst_old, "the moving contact points are most of the gradient's error", worst_full, worst_old);
+    if (c.rect && s > kSlideFade && s < 1 - kSlideFade && t > kSlideFade && t < 1 - kSlideFade) {
+      // the fade (the contact models' kSlideFade): exact farther inside than the fade; continuous
+      // where a point reaches an end (the same positions with s taken just inside and at 0)
+      const Vec3 d = lerp(c.x[0], c.x[1], s) - lerp(c.x[2], c.x[3], t);
+      Vec3 gf[4], g0[4], gi[4];
+      const Vec3 gd = g[0] + g[1];  // any vector: the function is linear in gd
+      gap_node_gradient(c.x[0], c.x[1], c.x[2], c.x[3], s, t, d, gd, gf, kSlideFade);
+      gap_node_gradient(c.x[0], c.x[1], c.x[2], c.x[3], s, t, d, gd, g0);
+      double dev = 0.0, jump = 0.0;
+      for (int k = 0; k < 4; ++k) dev = std::max(dev, norm(gf[k] - g0[k]));
+      gap_node_gradient(c.x[0], c.x[1], c.x[2], c.x[3], 1e-9, t, d, gd, gi, kSlideFade);
+      gap_node_gradient(c.x[0], c.x[1], c.x[2], c.x[3], 0.0, t, d, gd, g0, kSlideFade);
+      for (int k = 0; k < 4; ++k) jump = std::max(jump, norm(gi[k] - g0[k]));
+      expect(dev == 0.0, "fade: exact farther inside", dev, 0.0);
+      expect(jump < 1e-6 * scale, "fade: continuous where a contact point reaches an end", jump, 0.0);
+    }
+    Vec3 sum{0, 0, 0};
+    for (int k = 0; k < 4; ++k) sum = sum + g[k];
+    if (!c.yarn) expect(norm(sum) < 1e-12 * scale, "action = reaction: the gradients sum to zero", norm(sum), 0.0);
+  }
+}
+
 }  // namespace
 
 int main() {
   test_geometry();
   test_rect_sections();
+  test_gap_gradient();
   // lay-down fibers (r 5-12 um) from 1 us to 100 us; a 100 um thick fiber at 1 us
   for (double h : {1e-6, 5e-6, 1e-5, 1e-4})
     for (double r : {5e-6, 12e-6}) test_drop_on_yarns(h, r);

@@ -139,6 +139,53 @@ inline Vec3 gap_gradient_dir(Vec3 n, double dist, Vec3 de_dn) {
   const double lg = norm(g);
   return lg > 0.0 ? (1.0 / lg) * g : n;
 }
+// The same gradient unnormalised: dh/dd at fixed contact points (m/m).
+inline Vec3 gap_gradient(Vec3 n, double dist, Vec3 de_dn) { return n - (1.0 / dist) * (de_dn - dot(de_dn, n) * n); }
+// The gradient of a gap h(d) between the centre lines of two elements a0-a1 and b0-b1 with respect
+// to the four node positions (grad: a0, a1, b0, b1; m/m), d = a(s) - b(t) between their closest
+// points (closest_params_segment_segment) and gd = dh/dd at fixed s and t (gap_gradient). The
+// closest points move with the nodes: the conditions d.(a1 - a0) = 0 and d.(b1 - b0) = 0,
+// differentiated, give ds and dt for the parameters strictly inside (0, 1) (one at an end, or
+// s = 0 of a parallel pair, stays put). For a circle (gd = n, normal to both elements at
+// interior points) those terms vanish and grad = the lever weights (1-s, s, -(1-t), -t) times n;
+// for a rectangle's gap h = |d| - e(n) they do not: n turns as the contact points slide, and the
+// gradient jumps where a point reaches an end and stops sliding. `fade` (a fraction of the
+// parameter range) makes it continuous there: a parameter's sliding terms are blended in over its
+// last `fade` before an end (the gradient is exact farther inside; fade 0: exact everywhere).
+// A static partner (a yarn segment b0-b1): grad[0], grad[1].
+// the fade of the fiber-yarn contacts of rectangles (StaticContactModel): 5 % of an element
+inline constexpr double kSlideFade = 0.05;
+inline void gap_node_gradient(Vec3 a0, Vec3 a1, Vec3 b0, Vec3 b1, double s, double t, Vec3 d, Vec3 gd,
+                              Vec3 grad[4], double fade = 0.0) {
+  const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
+  for (int k = 0; k < 4; ++k) grad[k] = w[k] * gd;
+  // the weight of each parameter's sliding terms: 0 at an end, 1 from `fade` inside
+  auto ramp = [fade](double p) {
+    if (!(p > 0.0 && p < 1.0)) return 0.0;
+    const double m = std::min(p, 1.0 - p);
+    return fade > 0.0 && m < fade ? m / fade : 1.0;
+  };
+  const double ps = ramp(s), pt = ramp(t);
+  if (ps == 0.0 && pt == 0.0) return;
+  const Vec3 eA = a1 - a0, eB = b1 - b0;
+  const double A = dot(eA, eA), B = dot(eB, eB), C = dot(eA, eB);
+  // A ds - C dt = r1, C ds - B dt = r2 with r1 = -(dd_w.eA + d.deA), r2 = -(dd_w.eB + d.deB)
+  // (dd_w: d's change at fixed s and t); r1 = sum_k R1[k].dx_k, r2 likewise
+  const Vec3 R1[4] = {d - (1.0 - s) * eA, (-s) * eA - d, (1.0 - t) * eA, t * eA};
+  const Vec3 R2[4] = {(-(1.0 - s)) * eB, (-s) * eB, (1.0 - t) * eB + d, t * eB - d};
+  // dh = gd.dd_w + (gd.eA) ds - (gd.eB) dt, with ds = s1 r1 + s2 r2, dt = t1 r1 + t2 r2 for each
+  // set of sliding parameters: both (weight ps pt), s only (ps (1 - pt)), t only ((1 - ps) pt)
+  const double cs = dot(gd, eA), ct = -dot(gd, eB);
+  double c1 = 0.0, c2 = 0.0;
+  const double D = A * B - C * C;
+  if (ps * pt > 0.0 && D > 0.0) {
+    c1 += ps * pt * (cs * B + ct * C) / D;
+    c2 += ps * pt * (-cs * C - ct * A) / D;
+  }
+  if (ps * (1.0 - pt) > 0.0 && A > 0.0) c1 += ps * (1.0 - pt) * cs / A;
+  if ((1.0 - ps) * pt > 0.0 && B > 0.0) c2 += (1.0 - ps) * pt * (-ct / B);
+  for (int k = 0; k < 4; ++k) grad[k] = grad[k] + c1 * R1[k] + c2 * R2[k];
+}
 
 class StaticBodies {
  public:
@@ -225,7 +272,7 @@ class StaticBodies {
     element_segment_hits(xa, xb, r, margin, -1, scratch_);
     int yarn[kMaxHits];
     int nhit = 0;
-    for (const BodyHit &g : scratch_) insert(out, yarn, nhit, segs_[static_cast<std::size_t>(g.seg)].yarn, g.s, g.n, g.h, g.r2);
+    for (const BodyHit &g : scratch_) insert(out, yarn, nhit, segs_[static_cast<std::size_t>(g.seg)].yarn, g);
     return nhit;
   }
   // Every segment near element xa-xb of radius r (h < margin), except those of body `skip`, with the
@@ -296,6 +343,10 @@ class StaticBodies {
   // keep the smallest gap per yarn
   static void insert(BodyHit out[kMaxHits], int yarn[kMaxHits], int &nhit, int y, double s, Vec3 n, double h,
                      double r2) {
+    insert(out, yarn, nhit, y, BodyHit{s, n, h, r2, Vec3{}, -1, 0.0});
+  }
+  // the nearest hit of each yarn (with its segment and parameter on it)
+  static void insert(BodyHit out[kMaxHits], int yarn[kMaxHits], int &nhit, int y, const BodyHit &hit) {
     int slot = -1;
     for (int b = 0; b < nhit; ++b)
       if (yarn[b] == y) slot = b;
@@ -305,7 +356,7 @@ class StaticBodies {
       yarn[slot] = y;
       out[slot].h = std::numeric_limits<double>::max();
     }
-    if (h < out[slot].h) out[slot] = BodyHit{s, n, h, r2, Vec3{}, -1, 0.0};
+    if (hit.h < out[slot].h) out[slot] = hit;
   }
 
   std::vector<Segment> segs_;
@@ -339,9 +390,15 @@ class BodyContactModel : public rod::NodeForceModel {
     // vanish (B1(h_R) = B1'(h_R) = 0) and the next iterate would not see the contact
     double frac = 1.0;
     for (const Near &c : near_) {
-      Vec3 d = c.wa * dx[c.a];
-      if (c.b >= 0) d = d + c.wb * dx[c.b];
-      frac = std::min(frac, landing_fraction(law_, c.h, dot(c.n, d)));
+      double dh;
+      if (c.exact) {
+        dh = dot(c.ga, dx[c.a]) + dot(c.gb, dx[c.b]);
+      } else {
+        Vec3 d = c.wa * dx[c.a];
+        if (c.b >= 0) d = d + c.wb * dx[c.b];
+        dh = dot(c.n, d);
+      }
+      frac = std::min(frac, landing_fraction(law_, c.h, dh));
     }
     return frac;
   }
@@ -406,12 +463,19 @@ class BodyContactModel : public rod::NodeForceModel {
   }
 
   // one contact point: element a-b (b < 0: node a) at the hit
+  // (grad: the gap's gradient with respect to the positions of nodes a and b, gap_node_gradient,
+  // for an element of a rectangle; else the lever weights times hit.n. hit.n is the direction of
+  // the friction's normal either way.)
   void act(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J, int a, int b,
-           const BodyHit &hit) {
+           const BodyHit &hit, const Vec3 *grad = nullptr, double fscale = 1.0) {
+    if (grad && b >= 0) {
+      act_exact(nodes, F, J, a, b, hit, grad[0], grad[1], fscale);
+      return;
+    }
     const double wa = b < 0 ? 1.0 : 1.0 - hit.s, wb = b < 0 ? 0.0 : hit.s;
     const rod::Node &A = nodes[static_cast<std::size_t>(a)];
     const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
-    near_.push_back({a, b, wa, wb, hit.n, hit.h});
+    near_.push_back({a, b, wa, wb, hit.n, hit.h, false, Vec3{}, Vec3{}});
     min_gap_ = std::min(min_gap_, hit.h);
     if (hit.h >= law_.h_cut) return;
     ++contacts_;
@@ -457,6 +521,61 @@ class BodyContactModel : public rod::NodeForceModel {
     J->add(static_cast<std::size_t>(b), static_cast<std::size_t>(a), wa * wb, Kx, Cv);
     J->add(static_cast<std::size_t>(b), static_cast<std::size_t>(b), wb * wb, Kx, Cv);
   }
+  // act for an element whose gap has the node gradients ga, gb: the normal force fscale f g_k on
+  // node k (fscale = 1 / |dh/dd|, dh/dd the gap's gradient at fixed contact points, >= 1: the
+  // law's force per unit of it, so an end contact whose n runs nearly along the element, where
+  // the extent is ill-defined and |dh/dd| large, keeps the law's force size), its rate
+  // u = ga.v_a + gb.v_b, the tangent fscale dF/dh g g^T; friction as in act, normal to hit.n.
+  void act_exact(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J, int a, int b,
+                 const BodyHit &hit, Vec3 ga, Vec3 gb, double fscale) {
+    const double wa = 1.0 - hit.s, wb = hit.s;
+    const rod::Node &A = nodes[static_cast<std::size_t>(a)], &B = nodes[static_cast<std::size_t>(b)];
+    near_.push_back({a, b, wa, wb, hit.n, hit.h, true, ga, gb});
+    min_gap_ = std::min(min_gap_, hit.h);
+    if (hit.h >= law_.h_cut) return;
+    ++contacts_;
+    const Vec3 v = wa * A.v + wb * B.v - hit.vb;
+    const double inv_m = wa * wa / A.m + wb * wb / B.m;
+    const double r1 = element_law_radius(A, B);
+    PairLaw pl;
+    pl.setup(law_, r1, hit.r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(hit.r2));
+    const double u = dot(ga, A.v - hit.vb) + dot(gb, B.v - hit.vb);
+    const double f = fscale * pl.force(hit.h, u);
+    Vec3 fa = f * ga, fb = f * gb;
+    double cf = 0.0;
+    if (mu_ > 0.0 && f > 0.0 && h_ > 0.0) {
+      const Vec3 vt = v - dot(hit.n, v) * hit.n;
+      const double c_stick = stick_ / (inv_m * h_);
+      const double v_eps = mu_ * f / c_stick;
+      cf = mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
+      fa = fa - (wa * cf) * vt;
+      fb = fb - (wb * cf) * vt;
+    }
+    F[static_cast<std::size_t>(a)] = F[static_cast<std::size_t>(a)] + fa;
+    F[static_cast<std::size_t>(b)] = F[static_cast<std::size_t>(b)] + fb;
+    eval_sum_ = eval_sum_ + fa + fb;
+    if (!J && !track_stiff_) return;
+    const double dh = 1e-3 * law_.steric.h_R;
+    const double dFdh = fscale * ((pl.force(hit.h + dh, u) - pl.force(hit.h - dh, u)) / (2.0 * dh));
+    if (track_stiff_) eval_stiff_ += std::max(0.0, -dFdh);
+    if (!J) return;
+    const double du = 1e-6 + 1e-4 * std::fabs(u);
+    const double dFdu = fscale * ((pl.force(hit.h, u + du) - pl.force(hit.h, u - du)) / (2.0 * du));
+    const Vec3 g[2] = {ga, gb};
+    const double w[2] = {wa, wb};
+    const int node[2] = {a, b};
+    double Kx[9], Cv[9];
+    for (int p = 0; p < 2; ++p)
+      for (int q = 0; q < 2; ++q) {
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) {
+            const double gg = g[p][i] * g[q][j];
+            Kx[i * 3 + j] = dFdh * gg;
+            Cv[i * 3 + j] = dFdu * gg - w[p] * w[q] * cf * ((i == j ? 1.0 : 0.0) - hit.n[i] * hit.n[j]);
+          }
+        J->add(static_cast<std::size_t>(node[p]), static_cast<std::size_t>(node[q]), 1.0, Kx, Cv);
+      }
+  }
 
   const ContactLaw &law_;
   double mu_ = 0.0;
@@ -470,6 +589,8 @@ class BodyContactModel : public rod::NodeForceModel {
     double wa, wb;
     Vec3 n;
     double h;
+    bool exact;  // the gap's gradient ga, gb (element of a rectangle) instead of the weights times n
+    Vec3 ga, gb;
   };
   std::vector<Near> near_;
   int contacts_ = 0;
@@ -519,11 +640,20 @@ class StaticContactModel : public BodyContactModel {
         const double r = element_reach(a, b);
         const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits);
         for (int q = 0; q < nh; ++q) {
-          if (rect) {  // the gap from the rectangle's extent, the force along the gap's gradient
+          if (rect) {
+            // the gap from the rectangle's extent; its gradient with the contact points sliding
+            // along the element and the yarn (gap_node_gradient: docs/models/contact.md section 9)
             Vec3 de;
             const double dist = hits[q].h + r + hits[q].r2;
-            hits[q].h += r - element_extent(a, b, frames_.t2_of(nodes, k), frames_.t2_of(nodes, k + 1), hits[q].n, &de);
-            hits[q].n = gap_gradient_dir(hits[q].n, dist, de);
+            const Vec3 n = hits[q].n;
+            hits[q].h += r - element_extent(a, b, frames_.t2_of(nodes, k), frames_.t2_of(nodes, k + 1), n, &de);
+            hits[q].n = gap_gradient_dir(n, dist, de);
+            const StaticBodies::Segment &sg = bodies_.segments()[static_cast<std::size_t>(hits[q].seg)];
+            Vec3 grad[4];
+            const Vec3 gd = gap_gradient(n, dist, de);
+            gap_node_gradient(a.x, b.x, sg.a, sg.b, hits[q].s, hits[q].t, dist * n, gd, grad, kSlideFade);
+            act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q], grad, 1.0 / norm(gd));
+            continue;
           }
           act(nodes, F, J, static_cast<int>(k), static_cast<int>(k + 1), hits[q]);
         }
