@@ -46,7 +46,7 @@ def test_stick_setting_reaches_every_static_body(probe: Any, run: Path) -> None:
     # 300 steps in runs of 50 after step 4000, the solver counters in the thermo output
     assert sum(1 for line in text.splitlines() if line.startswith("run 50")) == 6
     thermo = [line for line in text.splitlines() if line.startswith("thermo_style")]
-    assert thermo == ["thermo_style custom step atoms f_beam[14] f_beam[15] f_beam[18] f_beam[19] f_beam[20]"]
+    assert thermo == ["thermo_style custom step atoms f_beam[14] f_beam[15] f_beam[18] f_beam[19] f_beam[20] f_beam[21]"]
     assert fix_lines(text, "fiber/beam")  # the fibers are defined before any contact
 
 

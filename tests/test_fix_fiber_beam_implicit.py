@@ -528,6 +528,34 @@ def test_plane_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path, dt:
     assert np.linalg.norm(fin[:, 4:7], axis=1).max() < 1e-3 * u_flow
 
 
+@pytest.mark.parametrize("plane", [True, False])
+def test_limited_iterations_are_counted(fiberdem_build: Path, tmp_path: Path, plane: bool) -> None:
+    """f_beam[21], the mean Newton iterations per fiber and step whose correction a contact
+    model's limiter shortened (landings, docs/models/contact.md section 8): a fiber released 0.5 um
+    above a plane (in the Newton solve) and pressed onto it by a 20 mm/s flow lands, so some of its
+    iterations were shortened, never more than it made (f_beam[19]); without the plane none were."""
+    fib = _crossing_pair(10e-6, 20e-6)[0]
+    L, r, dt = 200e-6, 5e-6, 1e-5
+    steps = 1000  # 10 ms: landed (0.5 um at 20 mm/s: 25 us)
+    floor = ["fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms steric implicit_force newton"] if plane else []
+    case = implicit_case(
+        [fib], [-0.6 * L, -0.6 * L, -r], [0.6 * L, 0.6 * L, 6 * r + 5e-6], dt=dt, steps=steps, newton="on",
+        commands=["fix drag all fiber/drag flow uniform 0 0 -0.02", *floor,
+                  "variable it equal f_beam[19]", "variable lim equal f_beam[21]",
+                  f'fix counters all print {steps} "${{it}} ${{lim}}" file counters.txt screen no'],
+        thermo_every=steps)
+    run_case(fiberdem_build, tmp_path, case)
+    rows = [line.split() for line in (tmp_path / "counters.txt").read_text().splitlines()
+            if line and not line.startswith("#")]
+    iterations, limited = (float(v) for v in rows[-1])
+    print(f"plane {plane}: {iterations:.3f} Newton iterations per step, {limited:.4f} shortened")
+    assert iterations >= 1.0
+    if plane:
+        assert 0.0 < limited <= iterations
+    else:
+        assert limited == 0.0
+
+
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_ribbon_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path, ranks: int) -> None:
     """Collapsed fibers (2 a1 x 2 a2 = 20 x 5 um, lying flat) in the Newton-solve contacts: they

@@ -14,7 +14,9 @@ reports:
 * loop time (s, the sum of LIGGGHTS' ``Loop time`` lines: start-up excluded);
 * mean Newton iterations and tangent formations per fiber and step over the probe
   (``f_beam[19]``, ``f_beam[20]``: counted since the fix was defined, i.e. over the probe);
-* the largest Newton iterations of one fiber in a step (``f_beam[15]`` at the thermo steps).
+* the largest Newton iterations of one fiber in a step (``f_beam[15]`` at the thermo steps);
+* mean iterations per fiber and step whose correction the contact limiter shortened (landings;
+  ``f_beam[21]``, over the probe).
 
 ``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections),
 ``--tolerance T`` laydown.newton_tolerance and ``--timestep DT`` laydown.timestep_s in every probe
@@ -65,7 +67,7 @@ ROOT = HERE.parents[1]
 COPIED = ("flow.grid", "yarns.txt")
 LOOP = re.compile(r"^Loop time of ([0-9.eE+-]+) on", re.M)
 #: thermo columns of the probe (after step and atoms)
-COLUMNS = ("iterations", "max_iterations", "tangents", "mean_iterations", "mean_tangents")
+COLUMNS = ("iterations", "max_iterations", "tangents", "mean_iterations", "mean_tangents", "mean_limited")
 
 
 def parse_setting(text: str) -> tuple[float, float | None]:
@@ -98,7 +100,7 @@ def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: 
     text = laydown.build_input(scene, chunk, (step + steps) // chunk, resume_step=step)
     counters = LiggghtsInput()
     counters.command("thermo_style", "custom", "step", "atoms",
-                     *(fix_ref("beam", k) for k in (14, 15, 18, 19, 20)))
+                     *(fix_ref("beam", k) for k in (14, 15, 18, 19, 20, 21)))
     lines = text.splitlines()
     at = next(i for i, line in enumerate(lines) if line.startswith("thermo_style"))
     lines[at] = counters.render().strip().splitlines()[-1]
@@ -166,6 +168,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
         "nodes": int(rows[-1][1]),
         "newton_iterations_per_fiber_step": last["mean_iterations"],
         "tangents_per_fiber_step": last["mean_tangents"],
+        "limited_iterations_per_fiber_step": last["mean_limited"],
         "largest_iterations_one_fiber": max(r[3] for r in rows),
     })
     return row

@@ -86,7 +86,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
   scalar_flag = 1;
   extscalar = 1;
   vector_flag = 1;
-  size_vector = 20;
+  size_vector = 21;
   extvector = 0;
   global_freq = 1;
   comm_forward = NSTATIC > kDynamicComm ? NSTATIC : kDynamicComm;
@@ -1103,6 +1103,7 @@ void FixFiberBeam::implicit_step() {
     stat_run_[0] += st.iterations * static_cast<double>(ids.size());
     stat_run_[1] += static_cast<double>(ids.size());
     stat_run_[2] += st.tangents * static_cast<double>(ids.size());
+    stat_run_[3] += st.limited * static_cast<double>(ids.size());
     for (size_t k = 0; k < n; ++k) {
       const double *b = recs[k];
       const rod::Node &nd = nodes[k];
@@ -1173,7 +1174,9 @@ void FixFiberBeam::implicit_step() {
    14 mean Newton iterations per fiber in the last step, 15 largest Newton iterations of a fiber in
    the last step, 16 sub-step splits in the last step (implicit), 17 rho_inf (-1: explicit),
    18 mean tangent formations (factorisations) per fiber in the last step, 19 and 20 mean Newton
-   iterations and tangent formations per fiber and step since the fix was created
+   iterations and tangent formations per fiber and step since the fix was created, 21 mean Newton
+   iterations per fiber and step whose correction a contact model's limiter shortened (landings,
+   docs/models/contact.md section 8), since the fix was created
 ------------------------------------------------------------------------- */
 
 double FixFiberBeam::compute_scalar() {
@@ -1221,10 +1224,10 @@ double FixFiberBeam::compute_vector(int n) {
     return gmx;
   }
   if (n == 16) return implicit_ ? rho_inf_ : -1.0;
-  if (n == 18 || n == 19) {
-    double all[3];
-    MPI_Allreduce(stat_run_, all, 3, MPI_DOUBLE, MPI_SUM, world);
-    return all[1] > 0 ? all[n == 18 ? 0 : 2] / all[1] : 0.0;
+  if (n == 18 || n == 19 || n == 20) {
+    double all[4];
+    MPI_Allreduce(stat_run_, all, 4, MPI_DOUBLE, MPI_SUM, world);
+    return all[1] > 0 ? all[n == 18 ? 0 : (n == 19 ? 2 : 3)] / all[1] : 0.0;
   }
   return 0.0;
 }

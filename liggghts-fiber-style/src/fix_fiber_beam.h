@@ -193,7 +193,7 @@ class FixFiberBeam : public Fix {
   std::vector<int> scount_, rcount_, sdispl_, rdispl_;
   double stat_local_[5] = {0, 0, 0, 0, 0};  // Newton iterations, fibers solved, splits, max iterations, tangents
   double stat_total_splits_ = 0;
-  double stat_run_[3] = {0, 0, 0};  // since the fix was created: Newton iterations, fibers solved, tangents
+  double stat_run_[4] = {0, 0, 0, 0};  // since the fix was created: Newton iterations, fibers solved, tangents, limited iterations
   std::string nodes_path_;
 
   int ref_done_ = 0;

@@ -216,6 +216,7 @@ struct Options {
 struct Stats {
   long iterations = 0;   // Newton iterations of this step (all attempts)
   long tangents = 0;     // tangent formations and factorisations
+  long limited = 0;      // iterations whose correction a force model's limiter shortened (contact landings)
   int splits = 0;        // sub-steps beyond one (0: the step converged whole)
   int depth = 0;         // deepest halving level used
   bool ok = true;
@@ -799,6 +800,7 @@ class Stepper {
         double frac = 1.0;
         for (NodeForceModel *m : *models_) frac = std::min(frac, m->limit(nodes, dxs_));
         if (!(frac > 0.0)) return false;
+        if (frac < 1.0) ++st.limited;
         damp *= frac;
       }
       for (std::size_t k = 0; k < n; ++k) {
