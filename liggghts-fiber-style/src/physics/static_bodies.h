@@ -139,6 +139,9 @@ inline Vec3 gap_gradient_dir(Vec3 n, double dist, Vec3 de_dn) {
   const double lg = norm(g);
   return lg > 0.0 ? (1.0 / lg) * g : n;
 }
+// The fade of gap_node_gradient in the fiber-yarn contacts of rectangles (StaticContactModel): the
+// last 5 % of an element's or a yarn segment's length before an end.
+inline constexpr double kSlideFade = 0.05;
 // The same gradient unnormalised: dh/dd at fixed contact points (m/m).
 inline Vec3 gap_gradient(Vec3 n, double dist, Vec3 de_dn) { return n - (1.0 / dist) * (de_dn - dot(de_dn, n) * n); }
 // The gradient of a gap h(d) between the centre lines of two elements a0-a1 and b0-b1 with respect
@@ -153,8 +156,6 @@ inline Vec3 gap_gradient(Vec3 n, double dist, Vec3 de_dn) { return n - (1.0 / di
 // parameter range) makes it continuous there: a parameter's sliding terms are blended in over its
 // last `fade` before an end (the gradient is exact farther inside; fade 0: exact everywhere).
 // A static partner (a yarn segment b0-b1): grad[0], grad[1].
-// the fade of the fiber-yarn contacts of rectangles (StaticContactModel): 5 % of an element
-inline constexpr double kSlideFade = 0.05;
 inline void gap_node_gradient(Vec3 a0, Vec3 a1, Vec3 b0, Vec3 b1, double s, double t, Vec3 d, Vec3 gd,
                               Vec3 grad[4], double fade = 0.0) {
   const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
