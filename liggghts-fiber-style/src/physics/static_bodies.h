@@ -134,16 +134,16 @@ inline double element_extent(const rod::Node &a, const rod::Node &b, Vec3 n, Vec
 // contact force acts along it (for a circle it is n): so the force is the gradient of the gap's
 // potential and the rank-one tangent along it is consistent (see SectionFrames for what both
 // choices measured).
+// gap_gradient: the gradient itself, dh/dd at fixed contact points (m/m); gap_gradient_dir its direction.
+inline Vec3 gap_gradient(Vec3 n, double dist, Vec3 de_dn) { return n - (1.0 / dist) * (de_dn - dot(de_dn, n) * n); }
 inline Vec3 gap_gradient_dir(Vec3 n, double dist, Vec3 de_dn) {
-  const Vec3 g = n - (1.0 / dist) * (de_dn - dot(de_dn, n) * n);
+  const Vec3 g = gap_gradient(n, dist, de_dn);
   const double lg = norm(g);
   return lg > 0.0 ? (1.0 / lg) * g : n;
 }
 // The fade of gap_node_gradient in the fiber-yarn contacts of rectangles (StaticContactModel): the
 // last 5 % of an element's or a yarn segment's length before an end.
 inline constexpr double kSlideFade = 0.05;
-// The same gradient unnormalised: dh/dd at fixed contact points (m/m).
-inline Vec3 gap_gradient(Vec3 n, double dist, Vec3 de_dn) { return n - (1.0 / dist) * (de_dn - dot(de_dn, n) * n); }
 // The gradient of a gap h(d) between the centre lines of two elements a0-a1 and b0-b1 with respect
 // to the four node positions (grad: a0, a1, b0, b1; m/m), d = a(s) - b(t) between their closest
 // points (closest_params_segment_segment) and gd = dh/dd at fixed s and t (gap_gradient). The
@@ -482,31 +482,21 @@ class BodyContactModel : public rod::NodeForceModel {
     ++contacts_;
     const Vec3 v = (B ? wa * A.v + wb * B->v : A.v) - hit.vb;  // relative to the body
     const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
-    const double r1 = B ? element_law_radius(A, *B) : law_radius(A);
-    PairLaw pl;
-    pl.setup(law_, r1, hit.r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(hit.r2));
+    const PairLaw pl = body_law(B ? element_law_radius(A, *B) : law_radius(A), hit.r2, inv_m);
     const double u = dot(hit.n, v);
     const double f = pl.force(hit.h, u);
     Vec3 fp = f * hit.n;
-    double cf = 0.0;  // friction secant coefficient (N s/m)
-    Vec3 vt;
-    if (mu_ > 0.0 && f > 0.0 && h_ > 0.0) {
-      vt = v - u * hit.n;
-      const double c_stick = stick_ / (inv_m * h_);
-      const double v_eps = mu_ * f / c_stick;
-      cf = mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
-      fp = fp - cf * vt;
-    }
+    const Vec3 vt = v - u * hit.n;
+    const double cf = friction_secant(f, vt, inv_m);  // (N s/m)
+    if (cf > 0.0) fp = fp - cf * vt;
     F[static_cast<std::size_t>(a)] = F[static_cast<std::size_t>(a)] + wa * fp;
     if (B) F[static_cast<std::size_t>(b)] = F[static_cast<std::size_t>(b)] + wb * fp;
     eval_sum_ = eval_sum_ + fp;
     if (!J && !track_stiff_) return;
-    const double dh = 1e-3 * law_.steric.h_R;
-    const double dFdh = (pl.force(hit.h + dh, u) - pl.force(hit.h - dh, u)) / (2.0 * dh);
+    const double dFdh = law_dh(pl, hit.h, u);
     if (track_stiff_) eval_stiff_ += std::max(0.0, -dFdh);
     if (!J) return;
-    const double du = 1e-6 + 1e-4 * std::fabs(u);
-    const double dFdu = (pl.force(hit.h, u + du) - pl.force(hit.h, u - du)) / (2.0 * du);
+    const double dFdu = law_du(pl, hit.h, u);
     // friction by its secant coefficient (the consistent derivative, measured: Newton failed in the
     // stick-slip tests of tests/test_static_bodies.cpp)
     double Kx[9], Cv[9];
@@ -537,18 +527,13 @@ class BodyContactModel : public rod::NodeForceModel {
     ++contacts_;
     const Vec3 v = wa * A.v + wb * B.v - hit.vb;
     const double inv_m = wa * wa / A.m + wb * wb / B.m;
-    const double r1 = element_law_radius(A, B);
-    PairLaw pl;
-    pl.setup(law_, r1, hit.r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(hit.r2));
+    const PairLaw pl = body_law(element_law_radius(A, B), hit.r2, inv_m);
     const double u = dot(ga, A.v - hit.vb) + dot(gb, B.v - hit.vb);
     const double f = fscale * pl.force(hit.h, u);
     Vec3 fa = f * ga, fb = f * gb;
-    double cf = 0.0;
-    if (mu_ > 0.0 && f > 0.0 && h_ > 0.0) {
-      const Vec3 vt = v - dot(hit.n, v) * hit.n;
-      const double c_stick = stick_ / (inv_m * h_);
-      const double v_eps = mu_ * f / c_stick;
-      cf = mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
+    const Vec3 vt = v - dot(hit.n, v) * hit.n;
+    const double cf = friction_secant(f, vt, inv_m);
+    if (cf > 0.0) {
       fa = fa - (wa * cf) * vt;
       fb = fb - (wb * cf) * vt;
     }
@@ -556,12 +541,10 @@ class BodyContactModel : public rod::NodeForceModel {
     F[static_cast<std::size_t>(b)] = F[static_cast<std::size_t>(b)] + fb;
     eval_sum_ = eval_sum_ + fa + fb;
     if (!J && !track_stiff_) return;
-    const double dh = 1e-3 * law_.steric.h_R;
-    const double dFdh = fscale * ((pl.force(hit.h + dh, u) - pl.force(hit.h - dh, u)) / (2.0 * dh));
+    const double dFdh = fscale * law_dh(pl, hit.h, u);
     if (track_stiff_) eval_stiff_ += std::max(0.0, -dFdh);
     if (!J) return;
-    const double du = 1e-6 + 1e-4 * std::fabs(u);
-    const double dFdu = fscale * ((pl.force(hit.h, u + du) - pl.force(hit.h, u - du)) / (2.0 * du));
+    const double dFdu = fscale * law_du(pl, hit.h, u);
     const Vec3 g[2] = {ga, gb};
     const double w[2] = {wa, wb};
     const int node[2] = {a, b};
@@ -576,6 +559,32 @@ class BodyContactModel : public rod::NodeForceModel {
           }
         J->add(static_cast<std::size_t>(node[p]), static_cast<std::size_t>(node[q]), 1.0, Kx, Cv);
       }
+  }
+
+  // the law between a fiber's contact point (law radius r1, reduced inverse mass inv_m) and a body
+  // (radius r2, at rest in the law's mass sense)
+  PairLaw body_law(double r1, double r2, double inv_m) const {
+    PairLaw pl;
+    pl.setup(law_, r1, r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
+    return pl;
+  }
+  // dF/dh and dF/du of the law at (h, u) by central differences (the iteration matrix)
+  double law_dh(const PairLaw &pl, double h, double u) const {
+    const double dh = 1e-3 * law_.steric.h_R;
+    return (pl.force(h + dh, u) - pl.force(h - dh, u)) / (2.0 * dh);
+  }
+  static double law_du(const PairLaw &pl, double h, double u) {
+    const double du = 1e-6 + 1e-4 * std::fabs(u);
+    return (pl.force(h, u + du) - pl.force(h, u - du)) / (2.0 * du);
+  }
+  // the regularised Coulomb friction's secant coefficient (N s/m) at normal force f, tangential
+  // velocity vt, reduced inverse mass inv_m: mu f / sqrt(|vt|^2 + v_eps^2), v_eps = mu f / c_stick,
+  // c_stick = stick m / dt (0 without friction or without a compressive force)
+  double friction_secant(double f, Vec3 vt, double inv_m) const {
+    if (!(mu_ > 0.0 && f > 0.0 && h_ > 0.0)) return 0.0;
+    const double c_stick = stick_ / (inv_m * h_);
+    const double v_eps = mu_ * f / c_stick;
+    return mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
   }
 
   const ContactLaw &law_;
