@@ -64,6 +64,16 @@ def test_anderson_reaches_the_beam_fix(probe: Any, run: Path) -> None:
     assert " anderson " not in plain[0], plain
 
 
+def test_landing_reaches_the_beam_fix(probe: Any, run: Path) -> None:
+    """--landing predict puts `landing predict` on fix fiber/beam; limit (the default) writes nothing."""
+    beam = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0, probe.probe_fields(landing="predict")),
+                     "fiber/beam")
+    assert len(beam) == 1 and " landing predict" in beam[0], beam
+    plain = fix_lines(probe.probe_input(run, 4000, 300, 50, 0.5, 100.0, probe.probe_fields(landing="limit")),
+                      "fiber/beam")
+    assert " landing " not in plain[0], plain
+
+
 def test_tolerance_and_timestep_reach_the_input(probe: Any, run: Path) -> None:
     """--tolerance T and --timestep DT reach fix fiber/beam's newton_tol and the timestep command."""
     fields = probe.probe_fields(tolerance=1e-5, timestep=2e-6)

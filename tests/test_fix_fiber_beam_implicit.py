@@ -251,6 +251,14 @@ def test_tangent_steps_range(fiberdem_build: Path, tmp_path: Path) -> None:
             run_case(fiberdem_build, tmp_path / f"ts{value}", case)
 
 
+def test_landing_choices(fiberdem_build: Path, tmp_path: Path) -> None:
+    """landing takes predict or limit."""
+    case = implicit_case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3,
+                         dt=1e-6, steps=1, fix_options="landing guess")
+    with pytest.raises(RuntimeError, match=r"'landing' takes 'predict' or 'limit'"):
+        run_case(fiberdem_build, tmp_path, case)
+
+
 def test_anderson_range(fiberdem_build: Path, tmp_path: Path) -> None:
     """anderson (mixing depth of the Newton corrections) takes an integer in [0, 8]."""
     for value in ("-1", "9"):
@@ -577,13 +585,14 @@ def test_ribbon_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Pat
         assert np.abs(fin[:, 1:4] - ref[:, 1:4]).max() < 1e-9
 
 
-@pytest.mark.parametrize("dt,width,element,anderson", [
-    (1e-6, 10e-6, 20e-6, 0), (1e-5, 10e-6, 20e-6, 0), (1e-4, 10e-6, 20e-6, 0),
-    (1e-6, 100e-6, 200e-6, 0), (1e-5, 100e-6, 200e-6, 0), (1e-4, 100e-6, 200e-6, 0),
-    (1e-5, 10e-6, 20e-6, 3), (1e-4, 100e-6, 200e-6, 3),
+@pytest.mark.parametrize("dt,width,element,anderson,landing", [
+    (1e-6, 10e-6, 20e-6, 0, "limit"), (1e-5, 10e-6, 20e-6, 0, "limit"), (1e-4, 10e-6, 20e-6, 0, "limit"),
+    (1e-6, 100e-6, 200e-6, 0, "limit"), (1e-5, 100e-6, 200e-6, 0, "limit"), (1e-4, 100e-6, 200e-6, 0, "limit"),
+    (1e-5, 10e-6, 20e-6, 3, "limit"), (1e-4, 100e-6, 200e-6, 3, "limit"),
+    (1e-5, 10e-6, 20e-6, 3, "predict"), (1e-4, 100e-6, 200e-6, 0, "predict"),
 ])
 def test_fiber_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path, dt: float, width: float,
-                                            element: float, anderson: int) -> None:
+                                            element: float, anderson: int, landing: str) -> None:
     """pair_style fiber/dlvo and fix wall/fiber/dlvo `implicit_force newton` (the two crossing fibers
     solved together in one Newton solve with their contact, docs/models/contact.md section 9): the
     upper fiber pressed by a 20 mm/s downward flow onto the lower one, which lies on the plane, at
@@ -591,14 +600,15 @@ def test_fiber_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path
     1e-5 and 1e-4 s, 100 um at 1e-4 s). After 30 ms: no NaN, no blow-up (every node slower than
     10 % of the flow), the lower fiber on the plane and the upper one on the lower one where they
     cross, both within 1 % of the radius of touching (closed form: centres r and 3 r above the
-    plane); also with Anderson mixing of the Newton corrections (anderson 3) at two of the steps.
+    plane); also with Anderson mixing of the Newton corrections (anderson 3) at two of the steps,
+    and with the landing predictor (landing predict) at two.
     Not asserted: rest. Measured after 30 ms: below 2e-5 m/s at 1e-6 s; the upper fiber's
     free ends still move at 3e-5 m/s (10 um, 1e-5 s), 8e-5 m/s (100 um, 1e-5 s) and 1.7e-3 m/s
     (100 um, 1e-4 s) while they sag under the flow."""
     r = width / 2
     u_flow = PAIR_FLOW_M_S
     case = _pair_on_plane(width, element, dt, round(0.03 / dt), newton=True,  # 30 ms
-                          fix_options=f"anderson {anderson}")
+                          fix_options=f"anderson {anderson} landing {landing}")
     fin = run_case(fiberdem_build, tmp_path, case).final
     assert fin.shape[0] == 22 and np.all(np.isfinite(fin[:, 1:7]))
     lower, upper = fin[:11], fin[11:]

@@ -166,6 +166,13 @@ BAD: dict[str, Bad] = {
         GOOD + FIBERS + "laydown:\n  beam_integrator: explicit\n  anderson_depth: 3\n",
         ("laydown.anderson_depth", "beam_integrator implicit"),
     ),
+    "cross_field_landing_needs_implicit": Bad(
+        GOOD + FIBERS + "laydown:\n  beam_integrator: explicit\n  newton_landing: predict\n",
+        ("laydown.newton_landing", "beam_integrator implicit"),
+    ),
+    "newton_landing_choice": Bad(
+        GOOD + FIBERS + "laydown:\n  newton_landing: guess\n", ("laydown.newton_landing", "limit"),
+    ),
     "anderson_depth_range": Bad(
         GOOD + FIBERS + "laydown:\n  anderson_depth: 9\n", ("laydown.anderson_depth", "0 <= x <= 8"),
     ),

@@ -108,9 +108,12 @@ def probe_input(run: Path, step: int, steps: int, chunk: int, mu: float, stick: 
 
 
 def probe_fields(anderson: int = 0, tolerance: float | None = None,
-                 timestep: float | None = None) -> dict[str, Any]:
-    """The scene fields of the options --anderson, --tolerance, --timestep (only those given)."""
+                 timestep: float | None = None, landing: str | None = None) -> dict[str, Any]:
+    """The scene fields of the options --anderson, --tolerance, --timestep, --landing (only those
+    given)."""
     out: dict[str, Any] = {}
+    if landing is not None:
+        out["laydown.newton_landing"] = landing
     if anderson:
         out["laydown.anderson_depth"] = anderson
     if tolerance is not None:
@@ -122,7 +125,7 @@ def probe_fields(anderson: int = 0, tolerance: float | None = None,
 
 def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
               anderson: int = 0, tolerance: float | None = None,
-              timestep: float | None = None) -> dict[str, Any]:
+              timestep: float | None = None, landing: str | None = None) -> dict[str, Any]:
     mu, stick = parse_setting(setting)
     work = run / "laydown" / "work"
     restart = work / f"laydown.{step}.restart"
@@ -131,7 +134,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     folder = out_root / (f"{run.name}-{step}-mu{mu:g}-k{stick if stick is not None else 'scene'}"
                          + (f"-aa{anderson}" if anderson else "")
                          + (f"-tol{tolerance:g}" if tolerance is not None else "")
-                         + (f"-dt{timestep:g}" if timestep is not None else ""))
+                         + (f"-dt{timestep:g}" if timestep is not None else "")
+                         + (f"-land-{landing}" if landing is not None else ""))
     folder.mkdir(parents=True, exist_ok=True)
     # the generated fibers less those removed up to the restart, as the stage's own resume writes them
     laydown.write_nodes_left(work / NODES_NAME, folder / NODES_NAME,
@@ -145,7 +149,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
         else:
             target.symlink_to((work / name).resolve())
     atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick,
-                                                               probe_fields(anderson, tolerance, timestep)))
+                                                               probe_fields(anderson, tolerance, timestep, landing)))
     fiberdem = build / "bin" / "fiberdem"
     t0 = time.perf_counter()
     proc = subprocess.run([str(fiberdem), "-in", "in.probe", "-log", "log.probe"], cwd=folder,
@@ -155,7 +159,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     rows = [r for r in thermo_rows(log) if r[0] > step]
     row: dict[str, Any] = {"run": str(run), "step": step, "steps": steps, "friction": mu,
                            "friction_stick": stick if mu > 0.0 else None, "anderson": anderson,
-                           "newton_tolerance": tolerance, "timestep_s": timestep,
+                           "newton_tolerance": tolerance, "timestep_s": timestep, "landing": landing,
                            "exit": proc.returncode,
                            "wall_s": wall, "folder": str(folder), "fiberdem": file_hash(fiberdem)}
     if proc.returncode != 0 or not rows:
@@ -189,6 +193,8 @@ def main() -> int:
                     help="laydown.newton_tolerance of every probe (default: the run's scene)")
     ap.add_argument("--timestep", type=float, default=None, metavar="DT",
                     help="laydown.timestep_s of every probe (default: the run's scene)")
+    ap.add_argument("--landing", choices=("limit", "predict"), default=None,
+                    help="laydown.newton_landing in every probe (default: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
     ap.add_argument("--probes", type=Path, default=Path("runs") / "probes")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "friction_probe.json")
@@ -202,7 +208,8 @@ def main() -> int:
     load = os.getloadavg()[0]
     with ThreadPoolExecutor(max_workers=args.parallel) as pool:
         rows = list(pool.map(lambda s: run_probe(args.run, args.step, args.steps, args.chunk, s, build,
-                                                 args.probes, args.anderson, args.tolerance, args.timestep),
+                                                 args.probes, args.anderson, args.tolerance, args.timestep,
+                                                 args.landing),
                                  args.settings))
     for r in rows:
         r["parallel"] = args.parallel

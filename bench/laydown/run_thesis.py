@@ -132,6 +132,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # solver option: a 10x looser Newton tolerance (1e-5 of the section radius, 150 pm for a 15 um
     # radius; the contact law's smallest length is 0.5 nm) with the mixing
     "loose_tol1e5_aa3": {**LOOSE, "laydown.newton_tolerance": 1.0e-5, "laydown.anderson_depth": 3},
+    # solver option: the same with the landing predictor (laydown.newton_landing predict: several
+    # contacts land in one Newton iteration; docs/bench/laydown.md "Landing predictor")
+    "loose_tol1e5_aa3_land": {**LOOSE, "laydown.newton_tolerance": 1.0e-5, "laydown.anderson_depth": 3,
+                              "laydown.newton_landing": "predict"},
     # issue 15's open question (d): side planes against periodic x/y, both on a piece of whole
     # weave repeats (repeat_piece: the 3 x 3 mm piece is not one), the injected mass scaled by area
     "loose_repeat": {**LOOSE},

@@ -196,6 +196,12 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     } else if (std::strcmp(kw, "anderson") == 0) {
       anderson_ = integer_in(iarg, kw, 0, rod::Stepper::kMaxAnderson);
       iarg += 2;
+    } else if (std::strcmp(kw, "landing") == 0) {
+      need(iarg, 1, kw);
+      if (std::strcmp(arg[iarg + 1], "predict") == 0) land_predict_ = true;
+      else if (std::strcmp(arg[iarg + 1], "limit") == 0) land_predict_ = false;
+      else error->all(FLERR, "fix fiber/beam: keyword 'landing' takes 'predict' or 'limit'");
+      iarg += 2;
     } else if (std::strcmp(kw, "max_split") == 0) {
       max_split_ = integer_in(iarg, kw, 0, 20);
       iarg += 2;
@@ -215,7 +221,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
                             "' (expected nodes, E, G, density, shear_factor, damping, drag, "
                             "stiffness_scale, inertia_scale, torque, dt_check, integrator, rho_inf, "
-                            "newton_tol, newton_max, tangent_steps, anderson, max_split, clamp)";
+                            "newton_tol, newton_max, tangent_steps, anderson, landing, max_split, clamp)";
       error->all(FLERR, fiberform::error_text(m));
     }
   }
@@ -973,6 +979,7 @@ void FixFiberBeam::implicit_step() {
   opt.contact_at_end = contact_at_end_;
   opt.tangent_steps = tangent_steps_;
   opt.anderson = anderson_;
+  opt.land_predict = land_predict_;
   if (!stepper_) stepper_ = std::make_unique<rod::Stepper>();
   if (!tangents_) tangents_ = std::make_unique<FiberTangents>();
   rod::Stepper &stepper = *stepper_;

@@ -180,6 +180,7 @@ class FixFiberBeam : public Fix {
   double rho_inf_ = 0.5, newton_tol_ = 1e-8;
   int newton_max_ = 25, max_split_ = 8;
   int anderson_ = 0;            // Anderson mixing depth of the Newton corrections (keyword anderson; 0: off)
+  bool land_predict_ = false;   // landing predictor of the contact corrections (keyword landing predict|limit)
   int tangent_steps_ = 50;      // a factored tangent serves at most this many steps (keyword tangent_steps)
   bool contact_at_end_ = true;  // contact forces at the end of the step only (rod::contact_force_weight)
   int clamp_groupbit_ = 0;

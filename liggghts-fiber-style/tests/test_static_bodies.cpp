@@ -119,6 +119,14 @@ void test_rect_sections() {
 using fiberform::testing::Fiber;
 using fiberform::testing::make_fiber;
 
+// every node of f loaded by acc (m/s^2) per mass downward (-z) and falling at speed (m/s)
+void load_falling(Fiber &f, double acc, double speed) {
+  for (rod::Node &nd : f.nodes) {
+    nd.F = {0, 0, -acc * nd.m};
+    nd.v = {0, 0, -speed};
+  }
+}
+
 // A fiber of radius r across two parallel yarns (along y at x = +-d, radius R), released 200 nm above
 // them at 50 mm/s with a load of 2000 m/s^2 per mass (the drag of the lay-down's flow on such
 // fibers), background drag time 1 ms: no pass-through, rest, two equal contact forces = the load.
@@ -133,10 +141,7 @@ void test_drop_on_yarns(double h, double r) {
   law.steric.s1_damping = true;  // as fix wall/fiber/yarns with implicit_force newton
   StaticContactModel model(b, law, 0.0);
   std::vector<rod::NodeForceModel *> models{&model};
-  for (rod::Node &nd : f.nodes) {
-    nd.F = {0, 0, -acc * nd.m};
-    nd.v = {0, 0, -0.05};
-  }
+  load_falling(f, acc, 0.05);
   rod::Options opt;
   opt.tau_drag = 1e-3;
   rod::Stepper st;
@@ -185,6 +190,81 @@ void test_drop_on_yarns(double h, double r) {
   std::printf("drop on yarns h %.0e s r %.0e m: %d steps, %.2f Newton iterations/step, %d splits, "
               "smallest gap %.3e m, final speed %.2e m/s, contact/load %.6f\n",
               h, r, steps, static_cast<double>(iters) / steps, splits, gap_min, vmax, fz / load);
+}
+
+// The landing predictor (rod::Options::land_predict): a fiber falling at 0.3 m/s onto five yarns
+// whose gaps differ (200-360 nm) covers 3 um per step of 10 us, so the first correction of the impact
+// step carries all five contacts from outside to deep inside. The limiter alone lands one of them per
+// iteration; the predictor lands them together. Both reach the same rest (statics of the load) with
+// no pass-through; the predictor takes fewer iterations for the impact and linearises contacts.
+struct LandingRun {
+  long impact_iters = 0, limited = 0, predicted = 0;
+  double gap_min = 1.0, fz = 0.0;
+  bool ok = true;
+  std::vector<Vec3> x;
+};
+LandingRun drop_on_five_yarns(bool predict) {
+  const double R = 60e-6, d = 110e-6, r = 12e-6, L = 0.6e-3, acc = 2000.0, h = 1e-5;
+  StaticBodies b;
+  for (int k = 0; k < 5; ++k) {
+    const double x = (k - 2) * d, z = -40e-9 * k;  // gaps 200, 240, ..., 360 nm
+    b.add_segment({x, -1e-3, z}, {x, 1e-3, z}, R, k);
+  }
+  Fiber f = make_fiber(24, L, r, 0.6 * r, Vec3{0, 0, R + r + 200e-9});
+  b.build_bins(r + 50e-9 + 2 * L / 24);
+  ContactLaw law;
+  law.steric.s1_damping = true;
+  StaticContactModel model(b, law, 0.0);
+  std::vector<rod::NodeForceModel *> models{&model};
+  load_falling(f, acc, 0.3);
+  rod::Options opt;
+  opt.tau_drag = 1e-3;
+  opt.land_predict = predict;
+  rod::Stepper st;
+  st.initialise(f.nodes, f.els, opt);
+  const rod::GenAlpha g = rod::gen_alpha(0.5);
+  LandingRun out;
+  for (int s = 0; s < 2000 && out.ok; ++s) {  // 20 ms: 20 drag times
+    const rod::Stats res = st.step(f.nodes, f.els, h, g, opt, &models);
+    out.ok = res.ok;
+    if (s < 3) out.impact_iters += res.iterations;
+    out.limited += res.limited;
+    out.predicted += res.predicted;
+    std::vector<Vec3> Fc(f.nodes.size());
+    model.evaluate(f.nodes, Fc, nullptr);
+    out.gap_min = std::min(out.gap_min, model.min_gap());
+  }
+  for (const rod::Node &nd : f.nodes) {
+    out.fz += nd.Fmodel.z / (acc * f.mass);
+    out.x.push_back(nd.x);
+  }
+  return out;
+}
+
+void test_landing_predictor() {
+  const double r = 12e-6;
+  const LandingRun lim = drop_on_five_yarns(false), pre = drop_on_five_yarns(true);
+  expect(lim.ok && pre.ok, "landing on five yarns: every step converges with and without the predictor");
+  expect(lim.predicted == 0, "landing on five yarns: no predicted contacts without the predictor", lim.predicted, 0);
+  expect(pre.predicted >= 4, "landing on five yarns: the predictor linearises the landing contacts",
+         pre.predicted, 4);
+  expect(pre.impact_iters < lim.impact_iters, "landing on five yarns: fewer Newton iterations for the impact",
+         pre.impact_iters, lim.impact_iters);
+  expect(lim.gap_min > -0.05 * r && pre.gap_min > -0.05 * r, "landing on five yarns: no pass-through",
+         std::min(lim.gap_min, pre.gap_min), -0.05 * r);
+  expect(std::fabs(lim.fz - 1.0) < 1e-3 && std::fabs(pre.fz - 1.0) < 1e-3,
+         "landing on five yarns: the contacts carry the load at rest", pre.fz, lim.fz);
+  // the same rest on the yarns: heights of the nodes (the fiber also slides slowly along x, down the
+  // slope of the yarns' heights, frictionless: a neutral motion that the impact's transients set)
+  double dx = 0.0;
+  for (std::size_t k = 0; k < pre.x.size(); ++k) dx = std::max(dx, std::fabs(pre.x[k].z - lim.x[k].z));
+  expect(dx < 1e-4 * r, "landing on five yarns: the same rest heights with and without the predictor", dx,
+         1e-4 * r);
+  std::printf("landing on five yarns: impact (3 steps) %ld iterations with the predictor, %ld without; limited "
+              "iterations %ld / %ld, predicted contacts %ld; smallest gap %.3e / %.3e m; rest heights differ "
+              "by %.2e m\n",
+              pre.impact_iters, lim.impact_iters, pre.limited, lim.limited, pre.predicted, pre.gap_min,
+              lim.gap_min, dx);
 }
 
 // A fiber lying on a plane (normal +z) under a normal load a_n and a tangential load a_t along x:
@@ -362,6 +442,7 @@ int main() {
   for (double h : {1e-6, 5e-6, 1e-5, 1e-4})
     for (double r : {5e-6, 12e-6}) test_drop_on_yarns(h, r);
   test_drop_on_yarns(1e-6, 50e-6);
+  test_landing_predictor();
   test_friction(0.3);
   test_friction(0.3, 10.0);  // keyword friction_stick: a softer stick creeps faster
   test_friction(0.8);

@@ -253,11 +253,7 @@ class ClusterContactModel : public rod::NodeForceModel {
       if (h >= law_.h_cut) continue;
       ++contacts_;
       const double u = dot(n, lerp(A0.v, A1.v, s) - lerp(B0.v, B1.v, t));
-      const double inv_mA = w[0] * w[0] / A0.m + w[1] * w[1] / A1.m;
-      const double inv_mB = w[2] * w[2] / B0.m + w[3] * w[3] / B1.m;
-      PairLaw pl;
-      const double rA = element_law_radius(A0, A1), rB = element_law_radius(B0, B1);
-      pl.setup(law_, rA, rB, inv_mA, inv_mB, law_.effective_potential(rA), law_.effective_potential(rB));
+      const PairLaw pl = pair_law(A0, A1, B0, B1, w);
       const double f = pl.force(h, u);
       for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] + (w[i] * f) * n;
       if (!J) continue;
@@ -283,6 +279,49 @@ class ClusterContactModel : public rod::NodeForceModel {
       frac = std::min(frac, BodyContactModel::landing_fraction(law_, c.h, dot(c.n, d)));
     }
     return frac;
+  }
+  // the landing predictor's contacts (rod::NodeForceModel::landings): the force f n with the
+  // signed lever weights, the law and rate as in evaluate
+  void landings(const std::vector<rod::Node> &nodes, const std::vector<Vec3> &dx,
+                std::vector<rod::Landing> &out) const override {
+    for (std::size_t q = 0; q < near_.size(); ++q) {
+      const Near &c = near_[q];
+      Vec3 d, v;
+      for (int i = 0; i < 4; ++i) {
+        d = d + c.w[i] * dx[static_cast<std::size_t>(c.node[i])];
+        v = v + c.w[i] * nodes[static_cast<std::size_t>(c.node[i])].v;
+      }
+      if (!BodyContactModel::lands_deep(law_, c.h, dot(c.n, d))) continue;
+      const rod::Node *p[4];
+      for (int i = 0; i < 4; ++i) p[i] = &nodes[static_cast<std::size_t>(c.node[i])];
+      const double u = dot(c.n, v);
+      const PairLaw pl = pair_law(*p[0], *p[1], *p[2], *p[3], c.w);
+      const double dh = 1e-3 * law_.steric.h_R, du = 1e-6 + 1e-4 * std::fabs(u);
+      rod::Landing L;
+      for (int i = 0; i < 4; ++i) {
+        L.node[i] = c.node[i];
+        L.g[i] = c.w[i] * c.n;
+      }
+      L.h = c.h;
+      L.phi = pl.force(c.h, u);
+      L.phi0 = pl.force(0.0, u);
+      L.dphidh0 = (pl.force(dh, u) - pl.force(-dh, u)) / (2.0 * dh);
+      L.dphidu0 = (pl.force(0.0, u + du) - pl.force(0.0, u - du)) / (2.0 * du);
+      L.owner = this;
+      L.index = static_cast<int>(q);
+      out.push_back(L);
+    }
+  }
+
+  // the law of two elements' contact points (signed lever weights w: reduced mass of each side)
+  PairLaw pair_law(const rod::Node &A0, const rod::Node &A1, const rod::Node &B0, const rod::Node &B1,
+                   const double w[4]) const {
+    const double inv_mA = w[0] * w[0] / A0.m + w[1] * w[1] / A1.m;
+    const double inv_mB = w[2] * w[2] / B0.m + w[3] * w[3] / B1.m;
+    PairLaw pl;
+    const double rA = element_law_radius(A0, A1), rB = element_law_radius(B0, B1);
+    pl.setup(law_, rA, rB, inv_mA, inv_mB, law_.effective_potential(rA), law_.effective_potential(rB));
+    return pl;
   }
 
   int contacts() const { return contacts_; }   // pairs below h_cut at the last evaluation

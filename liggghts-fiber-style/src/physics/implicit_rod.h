@@ -159,6 +159,20 @@ struct ForceJacobian {
   }
 };
 
+// A contact that a Newton correction would carry from outside (h > 0) to deeper than the steric
+// servo's linear range below h = 0 (the first case of the correction limiter, static_bodies.h
+// landing_fraction), for the landing predictor (Options::land_predict; Stepper::predict_landings):
+// its normal force phi g_i on node i (g_i: the gap's gradient with respect to node i, node -1:
+// none; up to two nodes of each side), the gap h (m) and rate u = sum g_i . v_i (m/s) at the
+// current iterate, phi (N) there, and phi, dphi/dh (N/m), dphi/du (N s/m) at (0, u).
+struct Landing {
+  int node[4] = {-1, -1, -1, -1};
+  Vec3 g[4];
+  double h = 0.0, phi = 0.0, phi0 = 0.0, dphidh0 = 0.0, dphidu0 = 0.0;
+  const void *owner = nullptr;  // the model and its contact's index there (a contact is taken once)
+  int index = -1;
+};
+
 // A force on the nodes that depends on their end-of-step state (positions, velocities) and is
 // evaluated at every Newton iterate (contact with static bodies: physics/static_bodies.h).
 class NodeForceModel {
@@ -188,6 +202,13 @@ class NodeForceModel {
     (void)dx;
     return 1.0;
   }
+  // appends to out the contacts that the correction dx (m, per node) would carry from outside to
+  // deep inside (struct Landing), evaluated at the state of the model's last evaluation
+  virtual void landings(const std::vector<Node> &nodes, const std::vector<Vec3> &dx, std::vector<Landing> &out) const {
+    (void)nodes;
+    (void)dx;
+    (void)out;
+  }
 };
 
 struct Element {  // between node k and k+1
@@ -211,12 +232,18 @@ struct Options {
   // solved with the held iteration matrix is combined with the last `anderson` ones (see the file
   // comment); the convergence test is unchanged
   int anderson = 0;
+  // landing predictor (Stepper::predict_landings): a correction that would carry contacts from
+  // outside to deep inside is solved again with those contacts' forces linearised about their
+  // landing gap, so several contacts land in one iteration; false: only the limiter, which scales
+  // the whole correction so that the first of them lands (one contact per iteration)
+  bool land_predict = false;
 };
 
 struct Stats {
   long iterations = 0;   // Newton iterations of this step (all attempts)
   long tangents = 0;     // tangent formations and factorisations
   long limited = 0;      // iterations whose correction a force model's limiter shortened (contact landings)
+  long predicted = 0;    // contacts the landing predictor linearised (Options::land_predict)
   int splits = 0;        // sub-steps beyond one (0: the step converged whole)
   int depth = 0;         // deepest halving level used
   bool ok = true;
@@ -781,6 +808,9 @@ class Stepper {
       apply_couplings();
       double raw_full = -1.0;  // the modified-Newton correction's size when Anderson mixing changes the step
       if (aa_m > 0) raw_full = anderson(nodes, aa_m);
+      // (with a tangent formed at this iterate only: on a held one the correction's prediction of the
+      // gaps is too poor to linearise contacts on, measured: docs/bench/laydown.md "Landing predictor")
+      if (have_models && opt.land_predict && tangent) st.predicted += predict_landings(nodes, gp, wc);
       // update; a correction that would rotate a node by more than kMaxTurn is shortened (damped
       // Newton), and a step that turns a node by more than kMaxStepTurn fails (and is split)
       double err = 0.0, turn = 0.0;
@@ -1041,13 +1071,15 @@ class Stepper {
     return blocktri::lu_factor(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data());
   }
 
-  void apply_couplings() {
+  void apply_couplings() { apply_couplings(rhs_); }
+  // the Woodbury correction of the couplings applied to T^-1 r held (scaled) in rhs
+  void apply_couplings(std::vector<double> &rhs) {
     const std::size_t m = tg_.cols.size();
     if (m == 0) return;
     tw_.assign(m, 0.0);
     for (std::size_t a = 0; a < m; ++a)
       for (int i = 0; i < 4; ++i)
-        for (int d = 0; d < 3; ++d) tw_[a] += tg_.cols[a].u[3 * i + d] * rhs_[6 * tg_.cols[a].node[i] + d];
+        for (int d = 0; d < 3; ++d) tw_[a] += tg_.cols[a].u[3 * i + d] * rhs[6 * tg_.cols[a].node[i] + d];
     ty_.resize(m);
     blocktri::lu_solve(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data(), tw_.data(), ty_.data());
     for (std::size_t b = 0; b < m; ++b) {
@@ -1055,12 +1087,103 @@ class Stepper {
       std::size_t off = 0;
       for (int r = 0; r < w.nr; ++r) {
         const std::size_t len = 6 * static_cast<std::size_t>(w.hi[r] - w.lo[r]);
-        double *y = &rhs_[6 * static_cast<std::size_t>(w.lo[r])];
+        double *y = &rhs[6 * static_cast<std::size_t>(w.lo[r])];
         for (std::size_t q = 0; q < len; ++q) y[q] -= w.z[off + q] * ty_[b];
         off += len;
       }
     }
   }
+
+  // ---- landing predictor (Options::land_predict). The correction y0 = -S^-1 r in rhs_ (scaled)
+  // would carry contacts c from outside to deep inside (NodeForceModel::landings). Their forces
+  // phi_c g_c are replaced by the linearisation about the landing gap 0 at the iterate's rate,
+  // phi0 + dphi/dh0 (h + g.d) + dphi/du0 gp (g.d), and the correction solved again:
+  //   (S + G K G^T) d = -r - G beta,  kappa_c = -wc (dphi/dh0 + gp dphi/du0),
+  //   beta_c = wc (phi_c - phi0_c - dphi/dh0_c h_c),
+  // by the Woodbury identity on the factored S: d = y0 - Z a, Z = S^-1 G,
+  // (I + K G^T Z) a = K G^T y0 + beta (one solve with S per contact, a dense system of their
+  // number). The contact's own derivative at h in S (small outside the servo's range) is left in.
+  // Contacts the new correction carries in are added, up to kLandRounds rounds and kMaxLandings
+  // contacts; the limiter then acts on the result as before (a contact loaded beyond the servo's
+  // linear range still lands by it). Called on iterations with a tangent formed for them only,
+  // where Anderson mixing has no history yet: y0 is the plain Newton correction. Contacts whose
+  // kappa is not positive (attraction) are left to the limiter. Returns the number of contacts
+  // linearised.
+  static constexpr int kLandRounds = 3;
+  static constexpr std::size_t kMaxLandings = 64;
+  long predict_landings(const std::vector<Node> &nodes, double gp, double wc) {
+    const std::size_t n = nodes.size(), N = 6 * n;
+    land_.clear();
+    lz_.clear();
+    lk_.clear();
+    lb_.clear();
+    ly0_.clear();
+    for (int round = 0; round < kLandRounds; ++round) {
+      dxs_.assign(n, Vec3{});
+      for (std::size_t k = 0; k < n; ++k)
+        if (!nodes[k].fixed)
+          for (int i = 0; i < 3; ++i) dxs_[k][i] = rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
+      lfound_.clear();
+      for (NodeForceModel *m : *models_) m->landings(nodes, dxs_, lfound_);
+      std::size_t added = 0;
+      for (const Landing &c : lfound_) {
+        if (land_.size() >= kMaxLandings) break;
+        bool have = false;
+        for (const Landing &o : land_) have = have || (o.owner == c.owner && o.index == c.index);
+        if (have) continue;
+        const double kappa = -wc * (c.dphidh0 + gp * c.dphidu0);
+        if (!(kappa > 0.0) || !std::isfinite(kappa) || !std::isfinite(c.phi + c.phi0)) continue;
+        if (ly0_.empty()) ly0_ = rhs_;
+        land_.push_back(c);
+        lk_.push_back(kappa);
+        lb_.push_back(wc * (c.phi - c.phi0 - c.dphidh0 * c.h));
+        // z = S^-1 g in the scaled system: the scaled g, the block solve, the couplings
+        std::vector<double> z(N, 0.0);
+        for (int i = 0; i < 4; ++i) {
+          const int k = c.node[i];
+          if (k < 0 || nodes[static_cast<std::size_t>(k)].fixed) continue;
+          for (int d = 0; d < 3; ++d) z[6 * k + d] += tg_.scale[6 * k + d] * c.g[i][d];
+        }
+        blocktri::solve_factored(static_cast<int>(n), tg_.D.data(), tg_.L.data(), tg_.U.data(), tg_.piv.data(), z.data());
+        apply_couplings(z);
+        lz_.push_back(std::move(z));
+        ++added;
+      }
+      if (added == 0) break;
+      // (I + K G^T Z) a = K G^T y0 + beta, G^T in the scaled system: the scaled g of each contact
+      const std::size_t m = land_.size();
+      auto gdot = [&](const Landing &c, const std::vector<double> &y) {
+        double v = 0.0;
+        for (int i = 0; i < 4; ++i) {
+          const int k = c.node[i];
+          if (k < 0 || nodes[static_cast<std::size_t>(k)].fixed) continue;
+          for (int d = 0; d < 3; ++d) v += tg_.scale[6 * k + d] * c.g[i][d] * y[6 * k + d];
+        }
+        return v;
+      };
+      lA_.assign(m * m, 0.0);
+      la_.assign(m, 0.0);
+      std::vector<double> b(m);
+      for (std::size_t p = 0; p < m; ++p) {
+        for (std::size_t q = 0; q < m; ++q) lA_[p * m + q] = (p == q ? 1.0 : 0.0) + lk_[p] * gdot(land_[p], lz_[q]);
+        b[p] = lk_[p] * gdot(land_[p], ly0_) + lb_[p];
+      }
+      lpiv_.resize(m);
+      if (!blocktri::lu_factor(static_cast<int>(m), lA_.data(), lpiv_.data())) {
+        rhs_ = ly0_;  // singular: the plain correction (the limiter acts on it)
+        return 0;
+      }
+      blocktri::lu_solve(static_cast<int>(m), lA_.data(), lpiv_.data(), b.data(), la_.data());
+      rhs_ = ly0_;
+      for (std::size_t q = 0; q < m; ++q)
+        for (std::size_t r = 0; r < N; ++r) rhs_[r] -= lz_[q][r] * la_[q];
+    }
+    return static_cast<long>(land_.size());
+  }
+  std::vector<Landing> land_, lfound_;
+  std::vector<std::vector<double>> lz_;
+  std::vector<double> lk_, lb_, ly0_, lA_, la_;
+  std::vector<int> lpiv_;
 
   std::vector<double> tw_, ty_;
   std::vector<int> flo_, fhi_;

@@ -391,24 +391,45 @@ class BodyContactModel : public rod::NodeForceModel {
     // vanish (B1(h_R) = B1'(h_R) = 0) and the next iterate would not see the contact
     double frac = 1.0;
     for (const Near &c : near_) {
-      double dh;
-      if (c.exact) {
-        dh = dot(c.ga, dx[c.a]) + dot(c.gb, dx[c.b]);
-      } else {
-        Vec3 d = c.wa * dx[c.a];
-        if (c.b >= 0) d = d + c.wb * dx[c.b];
-        dh = dot(c.n, d);
-      }
-      frac = std::min(frac, landing_fraction(law_, c.h, dh));
+      frac = std::min(frac, landing_fraction(law_, c.h, near_dh(c, dx)));
     }
     return frac;
+  }
+  // the landing predictor's contacts (rod::NodeForceModel::landings; its force along g_i = the
+  // lever weights times n, or the rectangle's gap gradient, times 1/|dh/dd| as in act_exact)
+  void landings(const std::vector<rod::Node> &, const std::vector<Vec3> &dx,
+                std::vector<rod::Landing> &out) const override {
+    for (std::size_t i = 0; i < near_.size(); ++i) {
+      const Near &c = near_[i];
+      if (!lands_deep(law_, c.h, near_dh(c, dx))) continue;
+      const PairLaw pl = body_law(c.r1, c.r2, c.inv_m);
+      rod::Landing L;
+      L.node[0] = c.a;
+      L.node[1] = c.b;
+      L.g[0] = c.exact ? c.ga : c.wa * c.n;
+      L.g[1] = c.exact ? c.gb : c.wb * c.n;
+      L.h = c.h;
+      L.phi = c.fscale * pl.force(c.h, c.u);
+      L.phi0 = c.fscale * pl.force(0.0, c.u);
+      L.dphidh0 = c.fscale * law_dh(pl, 0.0, c.u);
+      L.dphidu0 = c.fscale * law_du(pl, 0.0, c.u);
+      L.owner = this;
+      L.index = static_cast<int>(i);
+      out.push_back(L);
+    }
+  }
+  // the first case of the limiter (landing_fraction): from outside to deeper than the servo's
+  // linear range below the landing gap 0
+  static bool lands_deep(const ContactLaw &law, double h, double dh) {
+    const double cap = law.steric.cap();
+    return h > 1e-3 * cap && h + dh < -cap;
   }
   // The part in (0, 1] of a gap change dh from h that the correction limiter accepts (file comment).
   static double landing_fraction(const ContactLaw &law, double h, double dh) {
     const double hR = law.steric.h_R, cap = law.steric.cap(), land = 0.0;
     const double h1 = h + dh;
     // (a gap already at the landing point is let through: cutting there would stall the iteration)
-    if (h > land + 1e-3 * cap && h1 < land - cap) return (h - land) / (h - h1);
+    if (lands_deep(law, h, dh)) return (h - land) / (h - h1);
     if (h < land - cap && h1 > hR + cap) return (land - h) / (h1 - h);
     // leaving the servo's range from inside it: stop at its edge (else the next iterate sees no
     // force, falls back in, and the iteration cycles between the two)
@@ -476,14 +497,15 @@ class BodyContactModel : public rod::NodeForceModel {
     const double wa = b < 0 ? 1.0 : 1.0 - hit.s, wb = b < 0 ? 0.0 : hit.s;
     const rod::Node &A = nodes[static_cast<std::size_t>(a)];
     const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
-    near_.push_back({a, b, wa, wb, hit.n, hit.h, false, Vec3{}, Vec3{}});
+    const Vec3 v = (B ? wa * A.v + wb * B->v : A.v) - hit.vb;  // relative to the body
+    const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
+    const double r1 = B ? element_law_radius(A, *B) : law_radius(A);
+    const double u = dot(hit.n, v);
+    near_.push_back({a, b, wa, wb, hit.n, hit.h, false, Vec3{}, Vec3{}, r1, hit.r2, inv_m, u, 1.0});
     min_gap_ = std::min(min_gap_, hit.h);
     if (hit.h >= law_.h_cut) return;
     ++contacts_;
-    const Vec3 v = (B ? wa * A.v + wb * B->v : A.v) - hit.vb;  // relative to the body
-    const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
-    const PairLaw pl = body_law(B ? element_law_radius(A, *B) : law_radius(A), hit.r2, inv_m);
-    const double u = dot(hit.n, v);
+    const PairLaw pl = body_law(r1, hit.r2, inv_m);
     const double f = pl.force(hit.h, u);
     Vec3 fp = f * hit.n;
     const Vec3 vt = v - u * hit.n;
@@ -521,14 +543,15 @@ class BodyContactModel : public rod::NodeForceModel {
                  const BodyHit &hit, Vec3 ga, Vec3 gb, double fscale) {
     const double wa = 1.0 - hit.s, wb = hit.s;
     const rod::Node &A = nodes[static_cast<std::size_t>(a)], &B = nodes[static_cast<std::size_t>(b)];
-    near_.push_back({a, b, wa, wb, hit.n, hit.h, true, ga, gb});
+    const Vec3 v = wa * A.v + wb * B.v - hit.vb;
+    const double inv_m = wa * wa / A.m + wb * wb / B.m;
+    const double r1 = element_law_radius(A, B);
+    const double u = dot(ga, A.v - hit.vb) + dot(gb, B.v - hit.vb);
+    near_.push_back({a, b, wa, wb, hit.n, hit.h, true, ga, gb, r1, hit.r2, inv_m, u, fscale});
     min_gap_ = std::min(min_gap_, hit.h);
     if (hit.h >= law_.h_cut) return;
     ++contacts_;
-    const Vec3 v = wa * A.v + wb * B.v - hit.vb;
-    const double inv_m = wa * wa / A.m + wb * wb / B.m;
-    const PairLaw pl = body_law(element_law_radius(A, B), hit.r2, inv_m);
-    const double u = dot(ga, A.v - hit.vb) + dot(gb, B.v - hit.vb);
+    const PairLaw pl = body_law(r1, hit.r2, inv_m);
     const double f = fscale * pl.force(hit.h, u);
     Vec3 fa = f * ga, fb = f * gb;
     const Vec3 vt = v - dot(hit.n, v) * hit.n;
@@ -601,7 +624,16 @@ class BodyContactModel : public rod::NodeForceModel {
     double h;
     bool exact;  // the gap's gradient ga, gb (element of a rectangle) instead of the weights times n
     Vec3 ga, gb;
+    // the law's setup (body_law) and the rate at the evaluation, the force factor (act_exact)
+    double r1, r2, inv_m, u, fscale;
   };
+  // the gap change of contact c under the correction dx (linear)
+  static double near_dh(const Near &c, const std::vector<Vec3> &dx) {
+    if (c.exact) return dot(c.ga, dx[static_cast<std::size_t>(c.a)]) + dot(c.gb, dx[static_cast<std::size_t>(c.b)]);
+    Vec3 d = c.wa * dx[static_cast<std::size_t>(c.a)];
+    if (c.b >= 0) d = d + c.wb * dx[static_cast<std::size_t>(c.b)];
+    return dot(c.n, d);
+  }
   std::vector<Near> near_;
   int contacts_ = 0;
   double min_gap_ = 0.0;

@@ -145,6 +145,13 @@ class LaydownSection(_Section):
         "earlier ones (0: off; the convergence test is unchanged, so the sheet differs at the level "
         "of the Newton tolerance; docs/bench/laydown.md measures the speed-up)", "1", default=0, ge=0, le=8,
     )  # fmt: skip
+    newton_landing: Literal["limit", "predict"] = choice(
+        "fix fiber/beam landing: a Newton correction that would carry contacts from outside to deep "
+        "inside is shortened so that the first of them lands (limit), or solved again with those "
+        "contacts' forces linearised about their landing gap, so that several land in one iteration "
+        "(predict; the convergence test is unchanged; docs/bench/laydown.md measures the speed-up)",
+        default="limit",
+    )
     damping_time_s: float = quantity(
         "fix fiber/beam Kelvin-Voigt damping time", "s", default=0.0, ge=0.0, le=1.0
     )
@@ -182,6 +189,9 @@ class LaydownSection(_Section):
         if self.anderson_depth > 0 and self.beam_integrator == "explicit":
             raise scene_problem("anderson_depth", "only used with beam_integrator implicit (the "
                                 "Newton solve it accelerates)", self.anderson_depth)
+        if self.newton_landing != "limit" and self.beam_integrator == "explicit":
+            raise scene_problem("newton_landing", "only used with beam_integrator implicit (the "
+                                "Newton solve it accelerates)", self.newton_landing)
         if self.fiber_contact == "newton" and self.beam_integrator == "explicit":
             raise scene_problem("fiber_contact", "newton needs beam_integrator implicit (allowed "
                                 "with explicit: averaged)", self.fiber_contact)
