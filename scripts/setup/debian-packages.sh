@@ -12,6 +12,8 @@ PINNED=(
   "openfoam=1912.200626-1+b1"
   "libopenfoam=1912.200626-1+b1"
   "libsundials-dev=6.4.1+dfsg1-3"
+  # Eigen (header-only): the sparse LU of the contact clusters' capacitance matrix (implicit_rod.h)
+  "libeigen3-dev=3.4.0-4"
   "libopenmpi-dev="
   "openmpi-bin="
   "cmake="

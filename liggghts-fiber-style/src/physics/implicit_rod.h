@@ -60,7 +60,11 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <memory>
 #include <vector>
+
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
 
 #include "beam.h"
 #include "block_tridiag.h"
@@ -295,9 +299,12 @@ struct Tangent {
   ForceJacobian jac;           // the models' derivatives
   std::vector<double> D, L, U, scale;  // scaled block factors, the symmetric diagonal scaling
   std::vector<int> piv;
-  std::vector<CouplingColumn> cols;    // Woodbury couplings and their capacitance factors
-  std::vector<double> cap;
+  std::vector<CouplingColumn> cols;    // Woodbury couplings and their capacitance factors:
+  std::vector<double> cap;             // dense LU (fewer than Stepper::sparse_from couplings)
   std::vector<int> cpiv;
+  // sparse LU (Eigen, COLAMD ordering; from Stepper::sparse_from couplings on); immutable once
+  // factored, so copies of a Tangent may share it
+  std::shared_ptr<const Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>> cap_sparse;
 };
 
 class Stepper {
@@ -892,7 +899,8 @@ class Stepper {
   // S = T + sum_c kappa_c g_c g_c^T, T block tridiagonal (factored; block diagonal over the fibers of
   // a cluster), g_c the coupling's node weights times its normal, kappa_c = -(dF/dh + gp dF/du) > 0.
   // S^-1 r = y - Z (K^-1 + G^T Z)^-1 G^T y with y = T^-1 r, Z = T^-1 G: one solve per coupling over
-  // the fibers it touches, and a dense LU of the (couplings x couplings) capacitance matrix.
+  // the fibers it touches, and an LU of the (couplings x couplings) capacitance matrix (dense, or
+  // sparse from sparse_from couplings on: build_couplings).
   // Terms with kappa <= 0 (attraction) are left out of the iteration matrix (modified Newton).
 
   // ---- Anderson mixing of the modified-Newton corrections (Options::anderson; see the file comment)
@@ -1042,17 +1050,28 @@ class Stepper {
       kinv.push_back(1.0 / kappa);
     }
     const std::size_t m = tg_.cols.size();
-    tg_.cap.assign(m * m, 0.0);
+    const bool sparse = m > 0 && m >= sparse_from;  // (SparseLU divides by zero on an empty matrix)
+    tg_.cap_sparse.reset();
+    if (sparse) {
+      tg_.cap.clear();
+      trip_.clear();
+    } else {
+      tg_.cap.assign(m * m, 0.0);
+    }
     // G^T Z: entry (a, b) is non-zero only where a node of column a lies on a fiber that column
     // b's z covers, so each a visits only the columns listed on its nodes' fibers (the same sums
-    // in the same order as over all b: the other entries are exact zeros)
+    // in the same order as over all b: the other entries are exact zeros). In a pile that is one
+    // cluster the matrix is sparse (contacts couple through the fibers they share): from
+    // sparse_from couplings on it is factored as such (the dense LU was 45 % of the case-C pile's
+    // time at 14 ms; docs/bench/laydown.md "Sparse capacitance matrix").
     if (by_fiber_.size() < static_cast<std::size_t>(n)) by_fiber_.resize(static_cast<std::size_t>(n));
     for (int k = 0; k < n; ++k) by_fiber_[static_cast<std::size_t>(k)].clear();  // keeps their storage
     for (std::size_t b = 0; b < m; ++b)
       for (int r = 0; r < tg_.cols[b].nr; ++r) by_fiber_[static_cast<std::size_t>(tg_.cols[b].lo[r])].push_back(b);
     seen_.assign(m, m);
     for (std::size_t a = 0; a < m; ++a) {
-      tg_.cap[a * m + a] = kinv[a];
+      if (sparse) trip_.emplace_back(static_cast<int>(a), static_cast<int>(a), kinv[a]);
+      else tg_.cap[a * m + a] = kinv[a];
       near_.clear();
       for (int i = 0; i < 4; ++i)
         for (std::size_t b : by_fiber_[static_cast<std::size_t>(flo_[tg_.cols[a].node[i]])])
@@ -1064,12 +1083,29 @@ class Stepper {
         double v = 0.0;
         for (int i = 0; i < 4; ++i)
           for (int d = 0; d < 3; ++d) v += tg_.cols[a].u[3 * i + d] * tg_.cols[b].zval(tg_.cols[a].node[i], d);
-        tg_.cap[a * m + b] += v;
+        if (sparse) trip_.emplace_back(static_cast<int>(a), static_cast<int>(b), v);  // (summed)
+        else tg_.cap[a * m + b] += v;
       }
+    }
+    if (sparse) {
+      Eigen::SparseMatrix<double> A(static_cast<Eigen::Index>(m), static_cast<Eigen::Index>(m));
+      A.setFromTriplets(trip_.begin(), trip_.end());
+      auto lu = std::make_shared<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>>();
+      lu->compute(A);
+      if (lu->info() != Eigen::Success) return false;
+      tg_.cap_sparse = std::move(lu);
+      return true;
     }
     tg_.cpiv.resize(m);
     return blocktri::lu_factor(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data());
   }
+
+ public:
+  // couplings from which the capacitance matrix is factored sparse (build_couplings); below it
+  // the dense LU (the same numbers to round-off; tests/test_fiber_partners.cpp sets both)
+  std::size_t sparse_from = 128;
+
+ private:
 
   void apply_couplings() { apply_couplings(rhs_); }
   // the Woodbury correction of the couplings applied to T^-1 r held (scaled) in rhs
@@ -1081,7 +1117,12 @@ class Stepper {
       for (int i = 0; i < 4; ++i)
         for (int d = 0; d < 3; ++d) tw_[a] += tg_.cols[a].u[3 * i + d] * rhs[6 * tg_.cols[a].node[i] + d];
     ty_.resize(m);
-    blocktri::lu_solve(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data(), tw_.data(), ty_.data());
+    if (tg_.cap_sparse) {
+      const Eigen::Map<const Eigen::VectorXd> b(tw_.data(), static_cast<Eigen::Index>(m));
+      Eigen::Map<Eigen::VectorXd>(ty_.data(), static_cast<Eigen::Index>(m)) = tg_.cap_sparse->solve(b);
+    } else {
+      blocktri::lu_solve(static_cast<int>(m), tg_.cap.data(), tg_.cpiv.data(), tw_.data(), ty_.data());
+    }
     for (std::size_t b = 0; b < m; ++b) {
       const CouplingColumn &w = tg_.cols[b];
       std::size_t off = 0;
@@ -1186,6 +1227,7 @@ class Stepper {
   std::vector<int> lpiv_;
 
   std::vector<double> tw_, ty_;
+  std::vector<Eigen::Triplet<double>> trip_;  // build_couplings: the sparse capacitance matrix's entries
   std::vector<int> flo_, fhi_;
   std::vector<std::vector<std::size_t>> by_fiber_;  // build_couplings: columns by fiber (first node)
   std::vector<std::size_t> seen_, near_;
