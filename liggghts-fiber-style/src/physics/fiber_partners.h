@@ -257,16 +257,14 @@ class ClusterContactModel : public rod::NodeForceModel {
       const double f = pl.force(h, u);
       for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] + (w[i] * f) * n;
       if (!J) continue;
-      const double dh = 1e-3 * law_.steric.h_R;
-      const double du = 1e-6 + 1e-4 * std::fabs(u);
       rod::ForceJacobian::Coupling c;
       for (int i = 0; i < 4; ++i) {
         c.node[i] = idx[i];
         c.w[i] = w[i];
       }
       c.n = n;
-      c.dFdh = (pl.force(h + dh, u) - pl.force(h - dh, u)) / (2.0 * dh);
-      c.dFdu = (pl.force(h, u + du) - pl.force(h, u - du)) / (2.0 * du);
+      c.dFdh = pair_law_dh(law_, pl, h, u);
+      c.dFdu = pair_law_du(pl, h, u);
       J->couplings.push_back(c);
     }
   }
@@ -296,7 +294,6 @@ class ClusterContactModel : public rod::NodeForceModel {
       for (int i = 0; i < 4; ++i) p[i] = &nodes[static_cast<std::size_t>(c.node[i])];
       const double u = dot(c.n, v);
       const PairLaw pl = pair_law(*p[0], *p[1], *p[2], *p[3], c.w);
-      const double dh = 1e-3 * law_.steric.h_R, du = 1e-6 + 1e-4 * std::fabs(u);
       rod::Landing L;
       for (int i = 0; i < 4; ++i) {
         L.node[i] = c.node[i];
@@ -305,8 +302,8 @@ class ClusterContactModel : public rod::NodeForceModel {
       L.h = c.h;
       L.phi = pl.force(c.h, u);
       L.phi0 = pl.force(0.0, u);
-      L.dphidh0 = (pl.force(dh, u) - pl.force(-dh, u)) / (2.0 * dh);
-      L.dphidu0 = (pl.force(0.0, u + du) - pl.force(0.0, u - du)) / (2.0 * du);
+      L.dphidh0 = pair_law_dh(law_, pl, 0.0, u);
+      L.dphidu0 = pair_law_du(pl, 0.0, u);
       L.owner = this;
       L.index = static_cast<int>(q);
       out.push_back(L);

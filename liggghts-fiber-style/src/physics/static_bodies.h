@@ -44,6 +44,18 @@
 
 namespace fiberform::physics {
 
+// dF/dh and dF/du of a contact's law pl (set up from law) at (h, u) by central differences: the
+// iteration matrix's derivatives of the contacts inside the implicit step (bodies here, fiber-fiber
+// pairs in fiber_partners.h)
+inline double pair_law_dh(const ContactLaw &law, const PairLaw &pl, double h, double u) {
+  const double dh = 1e-3 * law.steric.h_R;
+  return (pl.force(h + dh, u) - pl.force(h - dh, u)) / (2.0 * dh);
+}
+inline double pair_law_du(const PairLaw &pl, double h, double u) {
+  const double du = 1e-6 + 1e-4 * std::fabs(u);
+  return (pl.force(h, u + du) - pl.force(h, u - du)) / (2.0 * du);
+}
+
 // One contact candidate: element parameter s (0 for a node), unit normal from the body to the fiber,
 // surface gap h (m), radius of the body (inf for a plane).
 struct BodyHit {
@@ -591,15 +603,8 @@ class BodyContactModel : public rod::NodeForceModel {
     pl.setup(law_, r1, r2, inv_m, 0.0, law_.effective_potential(r1), law_.effective_potential(r2));
     return pl;
   }
-  // dF/dh and dF/du of the law at (h, u) by central differences (the iteration matrix)
-  double law_dh(const PairLaw &pl, double h, double u) const {
-    const double dh = 1e-3 * law_.steric.h_R;
-    return (pl.force(h + dh, u) - pl.force(h - dh, u)) / (2.0 * dh);
-  }
-  static double law_du(const PairLaw &pl, double h, double u) {
-    const double du = 1e-6 + 1e-4 * std::fabs(u);
-    return (pl.force(h, u + du) - pl.force(h, u - du)) / (2.0 * du);
-  }
+  double law_dh(const PairLaw &pl, double h, double u) const { return pair_law_dh(law_, pl, h, u); }
+  static double law_du(const PairLaw &pl, double h, double u) { return pair_law_du(pl, h, u); }
   // the regularised Coulomb friction's secant coefficient (N s/m) at normal force f, tangential
   // velocity vt, reduced inverse mass inv_m: mu f / sqrt(|vt|^2 + v_eps^2), v_eps = mu f / c_stick,
   // c_stick = stick m / dt (0 without friction or without a compressive force)
