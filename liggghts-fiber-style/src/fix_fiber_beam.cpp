@@ -118,6 +118,15 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     }
     return v;
   };
+  // keyword kw at arg[iarg + 1] takes one of two words: true for yes, false for no
+  auto one_of = [&](int iarg, const char *kw, const char *yes, const char *no) {
+    need(iarg, 1, kw);
+    if (std::strcmp(arg[iarg + 1], yes) == 0) return true;
+    if (std::strcmp(arg[iarg + 1], no) == 0) return false;
+    const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' takes '" + yes + "' or '" + no + "'";
+    error->all(FLERR, m.c_str());
+    return false;
+  };
   for (int iarg = 3; iarg < narg;) {
     const char *kw = arg[iarg];
     if (std::strcmp(kw, "nodes") == 0) {
@@ -167,10 +176,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       for (int k = 0; k < 3; ++k) torque_[k] = force->numeric(FLERR, arg[iarg + 2 + k]);
       iarg += 5;
     } else if (std::strcmp(kw, "integrator") == 0) {
-      need(iarg, 1, kw);
-      if (std::strcmp(arg[iarg + 1], "implicit") == 0) implicit_ = true;
-      else if (std::strcmp(arg[iarg + 1], "explicit") == 0) implicit_ = false;
-      else error->all(FLERR, "fix fiber/beam: keyword 'integrator' takes 'implicit' or 'explicit'");
+      implicit_ = one_of(iarg, kw, "implicit", "explicit");
       iarg += 2;
     } else if (std::strcmp(kw, "rho_inf") == 0) {
       need(iarg, 1, kw);
@@ -178,10 +184,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       if (rho_inf_ > 1.0) error->all(FLERR, "fix fiber/beam: keyword 'rho_inf' must be in [0, 1]");
       iarg += 2;
     } else if (std::strcmp(kw, "contact_weighting") == 0) {
-      need(iarg, 1, kw);
-      if (std::strcmp(arg[iarg + 1], "end") == 0) contact_at_end_ = true;
-      else if (std::strcmp(arg[iarg + 1], "alpha") == 0) contact_at_end_ = false;
-      else error->all(FLERR, "fix fiber/beam: keyword 'contact_weighting' takes 'end' or 'alpha'");
+      contact_at_end_ = one_of(iarg, kw, "end", "alpha");
       iarg += 2;
     } else if (std::strcmp(kw, "newton_tol") == 0) {
       need(iarg, 1, kw);
@@ -197,10 +200,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       anderson_ = integer_in(iarg, kw, 0, rod::Stepper::kMaxAnderson);
       iarg += 2;
     } else if (std::strcmp(kw, "landing") == 0) {
-      need(iarg, 1, kw);
-      if (std::strcmp(arg[iarg + 1], "predict") == 0) land_predict_ = true;
-      else if (std::strcmp(arg[iarg + 1], "limit") == 0) land_predict_ = false;
-      else error->all(FLERR, "fix fiber/beam: keyword 'landing' takes 'predict' or 'limit'");
+      land_predict_ = one_of(iarg, kw, "predict", "limit");
       iarg += 2;
     } else if (std::strcmp(kw, "max_split") == 0) {
       max_split_ = integer_in(iarg, kw, 0, 20);
@@ -212,10 +212,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       clamp_groupbit_ = group->bitmask[ig];
       iarg += 2;
     } else if (std::strcmp(kw, "dt_check") == 0) {
-      need(iarg, 1, kw);
-      if (std::strcmp(arg[iarg + 1], "error") == 0) dt_check_error_ = true;
-      else if (std::strcmp(arg[iarg + 1], "warn") == 0) dt_check_error_ = false;
-      else error->all(FLERR, "fix fiber/beam: keyword 'dt_check' takes 'error' or 'warn'");
+      dt_check_error_ = one_of(iarg, kw, "error", "warn");
       iarg += 2;
     } else {
       const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
