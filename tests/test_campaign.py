@@ -11,13 +11,15 @@ their scenes and the per-sheet ratios, against the thesis' numbers and hand valu
   the field); its scene equals the point's in every section but press (so every stage before the
   press hashes the same inputs) and presses in pressure mode with the same guard;
 - statistics over seeds and ratios from hand-made collect rows, the pressure press's rows joined
-  by seed (and refused when they are not the same sheet);
+  by seed (and refused when they are not the same sheet); an earlier results file's other points
+  kept (run.py --keep);
 - end to end on a tiny campaign: both presses of one laid-down sheet, the lay-down not run twice.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 import statistics
 import subprocess
 import sys
@@ -128,6 +130,37 @@ def test_summary_and_ratios_from_hand_rows(setup: tuple[cp.Campaign, list[cp.She
         assert rows[sheet]["sem"]["mean"] == pytest.approx(want, rel=1e-9)
     assert rows[1]["sem"] is not None  # 13.5 ug lies between A and C too
     assert rows[4]["sem"] is None and rows[7]["sem"] is None  # beyond case C
+
+
+def test_kept_results_take_over_other_groups(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    """run.py --keep: the groups of an earlier results JSON that a call does not run keep their rows
+    (and failures, pending presses) and enter the summary as if collected again; a group the call
+    runs is replaced, not doubled."""
+    c, sheets, pts = setup
+    previous = {
+        "points": [{"name": "A"}, {"name": "S2"}],
+        "variants": [
+            {"point": "A", "section": "circular", "ranks": {"laydown": 2}, "seed": "1", "permeability_cfm": "300"},
+            {"point": "S2", "section": "circular", "ranks": {"laydown": 2}, "seed": "1", "permeability_cfm": "240"},
+            {"point": "S2", "section": "circular", "ranks": {"laydown": 2}, "seed": "2", "permeability_cfm": "260"},
+            {"point": "A", "section": "rectangular", "ranks": {"laydown": 2}, "seed": "1", "permeability_cfm": "1"},
+        ],
+        "failures": {"S2-circular-pressure": "x", "A-rectangular": "y"},
+        "pending": {"S2-circular-pressure": {"v": "waits"}},
+    }
+    kept = cp.kept_results(previous, {"A-rectangular", "S3-circular"})
+    assert sorted(kept.collected) == ["A-circular", "S2-circular"]
+    assert [p["name"] for p in kept.points] == ["A", "S2"]
+    assert kept.collected["S2-circular"] == [{"seed": "1", "permeability_cfm": "240"},
+                                             {"seed": "2", "permeability_cfm": "260"}]
+    assert len(kept.variants) == 3 and all(v["section"] == "circular" for v in kept.variants)
+    assert kept.failures == {"S2-circular-pressure": "x"} and kept.pending == previous["pending"]
+    s = cp.summarise(kept.collected)
+    assert s["S2-circular"]["permeability_cfm"]["mean"] == 250.0
+    rows = {r["sheet"]: r for r in cp.sheet_ratios(c, sheets, pts, s, "circular")}
+    assert rows[2]["direct"]["ratio"] == pytest.approx(250.0 / 255.0)
+    # nothing kept when the call runs every group
+    assert not cp.kept_results(previous, {"A-circular", "S2-circular", "A-rectangular"}).variants
 
 
 def test_campaign_file_errors_name_the_field(tmp_path: Path) -> None:
@@ -281,29 +314,65 @@ sheet,injection_mass_g,permeability_cfm,thickness_um,scaled_injection_mass_ug
 """
 
 
-def tiny_point(root: Path) -> tuple[cp.Campaign, dict[str, Any]]:
-    """The tiny campaign written to ``root/camp`` and the scene data of its first point (circular,
-    output under the relative folder runs/)."""
+def write_tiny_campaign(root: Path) -> Path:
+    """The tiny campaign's folder ``root/camp``: base scene, campaign and experiments."""
     camp = root / "camp"
     camp.mkdir()
     (camp / "base.yaml").write_text(TINY_BASE)
     (camp / "campaign.yaml").write_text(TINY_CAMPAIGN)
     (camp / "experiments.csv").write_text(TINY_EXPERIMENTS)
+    return camp
+
+
+def tiny_point(root: Path) -> tuple[cp.Campaign, dict[str, Any]]:
+    """The tiny campaign written to ``root/camp`` and the scene data of its first point (circular,
+    output under the relative folder runs/)."""
+    camp = write_tiny_campaign(root)
     c = cp.load_campaign(camp / "campaign.yaml")
     point = cp.point_scene(c, cp.points(c, cp.read_experiments(camp / "experiments.csv"))[0], "circular", camp,
                            Path("runs"))
     return c, point
 
 
+def test_runner_keep_adds_to_an_earlier_results_file(tmp_path: Path) -> None:
+    """run.py --keep --collect-only on the tiny campaign (nothing has run): the earlier file's other
+    point survives with its rows and ratios; an earlier file of another pressure_press is refused
+    before anything runs (exit 2, the file untouched)."""
+    camp = write_tiny_campaign(tmp_path)
+    c = cp.load_campaign(camp / "campaign.yaml")
+    assert c.pressure_press is not None
+    out = tmp_path / "result.json"
+    earlier = {"command": "--points S2", "pressure_press": c.pressure_press.model_dump(),
+               "points": [{"name": "S2", "mass_kg": 1e-9, "experimental_mass_kg": 1e-9, "press_target_m": 4e-4}],
+               "variants": [{"point": "S2", "section": "circular", "ranks": {"laydown": 1, "press": 1},
+                             "seed": "3", "permeability_cfm": "5.0"}],
+               "failures": {}, "pending": {}}
+    out.write_text(json.dumps(earlier))
+    cmd = [sys.executable, str(RUNNER), "--campaign", str(camp / "campaign.yaml"), "--runs", "runs/c",
+           "--points", "A", "--sections", "circular", "--collect-only", "--keep", "--out", str(out)]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    res = json.loads(out.read_text())
+    assert [p["name"] for p in res["points"]] == ["A", "S2"]  # campaign order
+    assert res["kept_from"]["groups"] == ["S2-circular"] and res["kept_from"]["command"] == "--points S2"
+    assert res["variants"] == earlier["variants"]
+    assert res["summary"]["S2-circular"]["permeability_cfm"]["mean"] == 5.0
+    sheet2 = next(r for r in res["sheets_unpressed"]["circular"] if r["sheet"] == 2)
+    assert sheet2["direct"]["ratio"] == pytest.approx(5.0 / 400.0)  # TINY_EXPERIMENTS: sheet 2 measured 400 CFM
+    # another pressure_press: refused, the file kept byte for byte
+    earlier["pressure_press"] = {**earlier["pressure_press"], "target_pressure_Pa": 1.0}
+    out.write_text(text := json.dumps(earlier))
+    shutil.rmtree(tmp_path / "runs")
+    bad = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "--keep" in bad.stderr and "pressure_press" in bad.stderr, bad.stderr
+    assert out.read_text() == text and not (tmp_path / "runs").exists()
+
+
 @pytest.mark.system
 def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path) -> None:
     if not (build_dir / "bin" / "fiberdem").is_file():
         pytest.fail(f"fiberdem not built in {build_dir}")
-    camp = tmp_path / "camp"
-    camp.mkdir()
-    (camp / "base.yaml").write_text(TINY_BASE)
-    (camp / "campaign.yaml").write_text(TINY_CAMPAIGN)
-    (camp / "experiments.csv").write_text(TINY_EXPERIMENTS)
+    camp = write_tiny_campaign(tmp_path)
     out = tmp_path / "result.json"
     cmd = [sys.executable, str(RUNNER), "--campaign", str(camp / "campaign.yaml"), "--runs", "runs/c",
            "--reduced", "--out", str(out)]

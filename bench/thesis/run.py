@@ -105,6 +105,9 @@ def _main() -> int:
                     help="seeds of a point run at once on this machine (fiberform sweep --jobs; not with --submit)")
     ap.add_argument("--collect-only", action="store_true", help="run nothing; tabulate what has finished")
     ap.add_argument("--out", type=Path, help="results JSON (default bench/thesis/results/campaign[-reduced].json)")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep the points of the existing results JSON that this call does not run (their rows "
+                         "unchanged; listed under kept_from), instead of writing only this call's points")
     args = ap.parse_args()
 
     c = cp.load_campaign(args.campaign)
@@ -128,6 +131,16 @@ def _main() -> int:
     if not 1 <= args.jobs <= 64 or (args.jobs > 1 and args.submit):
         print(f"--jobs {args.jobs}: allowed 1..64, and only without --submit", file=sys.stderr)
         return 2
+    out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
+    previous: dict[str, Any] | None = None
+    if args.keep and out.is_file():  # checked before anything runs
+        previous = json.loads(out.read_text())
+        current = None if c.pressure_press is None else c.pressure_press.model_dump()
+        if previous.get("pressure_press") != current:
+            print(f"--keep: {out} was written with pressure_press {previous.get('pressure_press')}, the campaign now "
+                  f"has {current}: its rows are not comparable; run their points again or give another --out",
+                  file=sys.stderr)
+            return 2
     fiberform = [sys.executable, "-m", "fiberform"]
     build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
     if args.runs.is_absolute():
@@ -208,18 +221,33 @@ def _main() -> int:
                  "press": scene.press.ranks if scene.press else 1}
         for r in rows:
             variants.append({"point": point, "section": section, "ranks": ranks, **r})
+    kept_from: dict[str, Any] | None = None
+    point_rows = [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
+                   "press_target_m": p.press_target_m} for p in chosen]
+    if previous is not None:
+        kept = cp.kept_results(previous, set(groups))
+        order = {p.name: i for i, p in enumerate(pts)}
+        point_rows = sorted(kept.points + point_rows, key=lambda r: order.get(r["name"], len(order)))
+        variants = kept.variants + variants
+        collected = {**kept.collected, **collected}
+        failures = {**kept.failures, **failures}
+        pending = {**kept.pending, **pending}
+        kept_from = {"file": str(out), "groups": sorted(kept.collected), "command": previous.get("command"),
+                     "machine": previous.get("machine"), "kept_from": previous.get("kept_from")}
+        print(f"kept from {out}: {', '.join(sorted(kept.collected)) or 'nothing'}")
     summary = cp.summarise(collected)
+    # the sections of this call and of any kept group
+    table_sections = [s for s in ("circular", "rectangular")
+                      if s in sections or any(g.split("-", 1)[1] == s for g in collected)]
     # per state (unpressed, pressed, pressure) the per-sheet ratios of its permeability metric, under
     # the key the report reads them from
     ratios = {f"sheets_{state}": {s: cp.sheet_ratios(c, sheets, pts, summary, s, metric)  # type: ignore[arg-type]
-                                  for s in sections}
+                                  for s in table_sections}
               for state, metric in campaign_report.QUANTITIES["permeability"].metric.items()}
-    out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
     cp.write_json(out, {
         "campaign": str(args.campaign),
         "command": " ".join(sys.argv[1:]), "machine": machine_info(), "seeds": seeds,
-        "points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
-                    "press_target_m": p.press_target_m} for p in chosen],
+        "points": point_rows, "kept_from": kept_from,
         "pressure_press": None if c.pressure_press is None else c.pressure_press.model_dump(),
         # --collect-only runs nothing: no wall time of its own (each stage's is in its variant row)
         "collect_only": bool(args.collect_only),

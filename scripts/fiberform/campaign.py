@@ -48,7 +48,8 @@ if TYPE_CHECKING:
     from .executors import BatchOptions
     from .sweep import Variant
 
-__all__ = ["Campaign", "Point", "PressureSweep", "Sheet", "load_campaign", "merge_pressure", "points",
+__all__ = ["Campaign", "Kept", "Point", "PressureSweep", "Sheet", "kept_results", "load_campaign", "merge_pressure",
+           "points",
            "point_scene", "pressure_scene", "read_experiments", "run_pressure_sweep", "sem_interp", "summarise",
            "sheet_ratios", "use_fiber_contact"]
 
@@ -410,6 +411,42 @@ def sheet_ratios(c: Campaign, sheets: list[Sheet], pts: list[Point],
         row["sem"] = None if v is None else {"mean": v, "ratio": v / s.permeability_cfm}
         out.append(row)
     return out
+
+
+#: the keys a results JSON's variant row has beside its collect.csv columns
+_VARIANT_KEYS = ("point", "section", "ranks")
+
+
+@dataclass(frozen=True)
+class Kept:
+    """What an earlier results JSON contributes to a new one (:func:`kept_results`)."""
+
+    points: list[dict[str, Any]]  #: its ``points`` entries of the kept groups' points
+    collected: dict[str, list[dict[str, str]]]  #: group -> its collect rows, as :func:`summarise` takes them
+    variants: list[dict[str, Any]]  #: its variant rows of the kept groups, unchanged
+    failures: dict[str, str]  #: its failures of the kept groups (``A-circular``, ``A-circular-pressure``)
+    pending: dict[str, dict[str, str]]  #: its pending pressure presses of the kept groups
+
+
+def kept_results(previous: dict[str, Any], replaced: set[str]) -> Kept:
+    """The groups (``"A-circular"``) of an earlier results JSON that this invocation does not run
+    (not in ``replaced``), so that ``bench/thesis/run.py --keep`` can add points to a results file
+    whose other points' run folders are gone (a new machine): their variant rows are taken over
+    unchanged and enter the summary and the per-sheet ratios as if collected again."""
+    variants = [v for v in previous.get("variants", [])
+                if f"{v['point']}-{v['section']}" not in replaced]
+    collected: dict[str, list[dict[str, str]]] = {}
+    for v in variants:
+        collected.setdefault(f"{v['point']}-{v['section']}", []).append(
+            {k: x for k, x in v.items() if k not in _VARIANT_KEYS})
+    names = {v["point"] for v in variants}
+
+    def kept(key: str) -> bool:
+        return key.removesuffix("-pressure") in collected
+
+    return Kept(points=[p for p in previous.get("points", []) if p["name"] in names], collected=collected,
+                variants=variants, failures={k: v for k, v in previous.get("failures", {}).items() if kept(k)},
+                pending={k: v for k, v in previous.get("pending", {}).items() if kept(k)})
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

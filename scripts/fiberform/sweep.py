@@ -307,8 +307,8 @@ def _read_record(sweep_dir: Path) -> dict[str, Any]:
 
 
 def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
-    """collect.csv (one row per variant: seed, swept values, every stage's metrics and wall time;
-    empty where a stage has not finished) and collect.png; returns the paths and the row count."""
+    """collect.csv (one row per variant: seed, swept values, every stage's metrics, wall time and
+    git revision of the code that made its product; empty where a stage has not finished) and collect.png; returns the paths and the row count."""
     rec = _read_record(sweep_dir)
     root = sweep_dir if sweep_dir.is_dir() else sweep_dir.parent
     paths = list(rec["set"])
@@ -330,6 +330,9 @@ def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
             if "elapsed_s" in prov:
                 row[f"{st.name}_wall_s"] = float(prov["elapsed_s"])
                 columns.append(f"{st.name}_wall_s")
+            if "git_revision" in prov:  # the code that made the product (rows of other versions can mix)
+                row[f"{st.name}_git_revision"] = str(prov["git_revision"])
+                columns.append(f"{st.name}_git_revision")
         rows.append(row)
     header = ["variant", "seed", *paths, *dict.fromkeys(c for c in columns if c not in paths)]
     buf = io.StringIO()
@@ -338,7 +341,8 @@ def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
     w.writerows(rows)
     out_csv, out_png = root / COLLECT_CSV, root / COLLECT_PNG
     atomic_write_text(out_csv, buf.getvalue())
-    _plot(rows, paths, [c for c in header[2 + len(paths):] if not c.endswith("_wall_s")], out_png)
+    _plot(rows, paths, [c for c in header[2 + len(paths):] if not c.endswith(("_wall_s", "_git_revision"))],
+          out_png)
     return out_csv, out_png, len(rows)
 
 
