@@ -132,10 +132,9 @@ def _main() -> int:
         print(f"--jobs {args.jobs}: allowed 1..64, and only without --submit", file=sys.stderr)
         return 2
     out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
-    previous: dict[str, Any] | None = None
-    if args.keep and out.is_file():  # checked before anything runs
+    current = None if c.pressure_press is None else c.pressure_press.model_dump()
+    if args.keep and out.is_file():  # checked before anything runs (and read again at the end)
         previous = json.loads(out.read_text())
-        current = None if c.pressure_press is None else c.pressure_press.model_dump()
         if previous.get("pressure_press") != current:
             print(f"--keep: {out} was written with pressure_press {previous.get('pressure_press')}, the campaign now "
                   f"has {current}: its rows are not comparable; run their points again or give another --out",
@@ -224,7 +223,11 @@ def _main() -> int:
     kept_from: dict[str, Any] | None = None
     point_rows = [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
                    "press_target_m": p.press_target_m} for p in chosen]
-    if previous is not None:
+    if args.keep and out.is_file():  # as it is now: another call may have added to it meanwhile
+        previous = json.loads(out.read_text())
+        if previous.get("pressure_press") != current:
+            print(f"--keep: {out} was rewritten meanwhile with another pressure_press; not kept", file=sys.stderr)
+            return 2
         kept = cp.kept_results(previous, set(groups))
         order = {p.name: i for i, p in enumerate(pts)}
         point_rows = sorted(kept.points + point_rows, key=lambda r: order.get(r["name"], len(order)))
@@ -248,7 +251,7 @@ def _main() -> int:
         "campaign": str(args.campaign),
         "command": " ".join(sys.argv[1:]), "machine": machine_info(), "seeds": seeds,
         "points": point_rows, "kept_from": kept_from,
-        "pressure_press": None if c.pressure_press is None else c.pressure_press.model_dump(),
+        "pressure_press": current,
         # --collect-only runs nothing: no wall time of its own (each stage's is in its variant row)
         "collect_only": bool(args.collect_only),
         "wall_s": None if args.collect_only else time.monotonic() - t_start, "failures": failures, "pending": pending, "variants": variants,
