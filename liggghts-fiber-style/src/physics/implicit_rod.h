@@ -830,10 +830,7 @@ class Stepper {
       double damp = turn > kMaxTurn ? kMaxTurn / turn : 1.0;
       if (have_models) {
         // the models may shorten the correction further (contact gaps: static_bodies.h)
-        dxs_.assign(n, Vec3{});
-        for (std::size_t k = 0; k < n; ++k)
-          if (!nodes[k].fixed)
-            for (int i = 0; i < 3; ++i) dxs_[k][i] = damp * rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
+        correction_translations(nodes, damp);
         double frac = 1.0;
         for (NodeForceModel *m : *models_) frac = std::min(frac, m->limit(nodes, dxs_));
         if (!(frac > 0.0)) return false;
@@ -1150,6 +1147,15 @@ class Stepper {
   // where Anderson mixing has no history yet: y0 is the plain Newton correction. Contacts whose
   // kappa is not positive (attraction) are left to the limiter. Returns the number of contacts
   // linearised.
+  // dxs_: the nodes' translations of the current correction rhs_ (scaled back) times factor, zero
+  // for fixed nodes; what the force models' limit() and landings() are asked about
+  void correction_translations(const std::vector<Node> &nodes, double factor) {
+    const std::size_t n = nodes.size();
+    dxs_.assign(n, Vec3{});
+    for (std::size_t k = 0; k < n; ++k)
+      if (!nodes[k].fixed)
+        for (int i = 0; i < 3; ++i) dxs_[k][i] = factor * rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
+  }
   static constexpr int kLandRounds = 3;
   static constexpr std::size_t kMaxLandings = 64;
   long predict_landings(const std::vector<Node> &nodes, double gp, double wc) {
@@ -1160,10 +1166,7 @@ class Stepper {
     lb_.clear();
     ly0_.clear();
     for (int round = 0; round < kLandRounds; ++round) {
-      dxs_.assign(n, Vec3{});
-      for (std::size_t k = 0; k < n; ++k)
-        if (!nodes[k].fixed)
-          for (int i = 0; i < 3; ++i) dxs_[k][i] = rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
+      correction_translations(nodes, 1.0);
       lfound_.clear();
       for (NodeForceModel *m : *models_) m->landings(nodes, dxs_, lfound_);
       std::size_t added = 0;
