@@ -6,7 +6,8 @@
    1e-5 s, centre line outside the yarn at 1e-4 s) and the two contact forces equal the support
    reactions of a beam on two supports (statics); Coulomb friction on a plane holds below mu N and
    slides at (F_t - mu N)/M above it. The rectangular contact section of a collapsed fiber against
-   the closed forms of a rectangle (extent along a direction; gaps to a yarn and a plane). */
+   the closed forms of a rectangle (extent along a direction; gaps to a yarn and a plane). The
+   per-step candidate lists of the yarn search give exactly the full lookup's hits. */
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -434,8 +435,69 @@ void test_gap_gradient() {
 
 }  // namespace
 
+// StaticBodies::Candidates (the per-step short list of StaticContactModel): element_hits over a
+// list made at (a0, b0) equals the full bin lookup, hit for hit and bit for bit, for elements moved
+// by up to 1.5 skin in random directions (beyond 0.999 skin the list is not complete and the lookup
+// is used), in a tangle of random yarn segments; a list of stale bins is not used.
+void test_candidates() {
+  StaticBodies b;
+  unsigned long seed = 12345;
+  auto uni = [&seed]() {  // a small LCG: the test's own numbers, no library generator's sequence
+    seed = seed * 6364136223846793005UL + 1442695040888963407UL;
+    return static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0);
+  };
+  const double L = 1e-3, R = 50e-6;
+  for (int y = 0; y < 40; ++y) {
+    Vec3 a{uni() * L, uni() * L, uni() * 0.2e-3};
+    for (int k = 0; k < 6; ++k) {
+      const Vec3 d{(uni() - 0.5) * 200e-6, (uni() - 0.5) * 200e-6, (uni() - 0.5) * 60e-6};
+      b.add_segment(a, a + d, R * (0.5 + uni()), y);
+      a = a + d;
+    }
+  }
+  const double r = 10e-6, margin = r + 1e-6, skin = r;
+  b.build_bins(r + margin + 200e-6);
+  int used = 0, fell_back = 0, hits_seen = 0, mismatches = 0;
+  for (int e = 0; e < 3000; ++e) {
+    const Vec3 a0{uni() * L, uni() * L, uni() * 0.2e-3};
+    const Vec3 b0 = a0 + Vec3{(uni() - 0.5) * 100e-6, (uni() - 0.5) * 100e-6, (uni() - 0.5) * 40e-6};
+    StaticBodies::Candidates c;
+    b.element_candidates(a0, b0, r, margin, skin, c);
+    for (int m = 0; m < 4; ++m) {
+      auto move = [&]() {
+        const Vec3 d{uni() - 0.5, uni() - 0.5, uni() - 0.5};
+        return (1.5 * skin * uni() / std::max(1e-12, beam::norm(d))) * d;
+      };
+      const Vec3 a = a0 + move(), bb = b0 + move();
+      BodyHit full[StaticBodies::kMaxHits], listed[StaticBodies::kMaxHits];
+      const int nf = b.element_hits(a, bb, r, margin, full);
+      const int nl = b.element_hits(a, bb, r, margin, listed, &c);
+      (b.complete(c, a, bb, r, margin) ? used : fell_back) += 1;
+      hits_seen += nf;
+      bool same = nf == nl;
+      for (int q = 0; same && q < nf; ++q)
+        same = full[q].seg == listed[q].seg && full[q].h == listed[q].h && full[q].s == listed[q].s &&
+               full[q].t == listed[q].t && full[q].n.x == listed[q].n.x && full[q].n.y == listed[q].n.y &&
+               full[q].n.z == listed[q].n.z;
+      mismatches += same ? 0 : 1;
+    }
+  }
+  expect(mismatches == 0, "candidate list: the same hits as the full lookup", mismatches, 0);
+  expect(used > 2000 && fell_back > 1000, "candidate list: both paths taken", used, fell_back);
+  expect(hits_seen > 1000, "candidate list: elements near yarns", hits_seen, 1000);
+  // rebuilt bins: the list is stale
+  StaticBodies::Candidates c;
+  const Vec3 a0{0.5e-3, 0.5e-3, 0.1e-3}, b0{0.55e-3, 0.5e-3, 0.1e-3};
+  b.element_candidates(a0, b0, r, margin, skin, c);
+  expect(b.complete(c, a0, b0, r, margin), "candidate list complete where it was made");
+  expect(!b.complete(c, a0, b0, r, 2 * margin), "candidate list: another margin is not covered");
+  b.build_bins(r + margin + 200e-6);
+  expect(!b.complete(c, a0, b0, r, margin), "candidate list stale after the bins are rebuilt");
+}
+
 int main() {
   test_geometry();
+  test_candidates();
   test_rect_sections();
   test_gap_gradient();
   // lay-down fibers (r 5-12 um) from 1 us to 100 us; a 100 um thick fiber at 1 us

@@ -213,6 +213,22 @@ class StaticBodies {
     Vec3 v;     // velocity (m/s): a plate moving as a rigid body; p is its position at the time
                 // the fibers are solved for (the end of the step)
   };
+  // A reusable short list of element_segment_hits' candidates for one element (StaticContactModel
+  // builds one per element at the start of each step attempt, element_candidates): the segments of
+  // the bin of the element's midpoint that lie within margin + skin of the element as it was then,
+  // in the bin's order. While the midpoint stays in that bin, the bins are not rebuilt, r and margin
+  // are the same and neither end has moved by skin or more, every segment within margin of the
+  // element is on the list (the distance of two segments changes by at most the largest move of
+  // an end), so the hits found over it are those of the full lookup, in the same order.
+  struct Candidates {
+    bool valid = false;
+    long key = 0;           // bin of the midpoint
+    bool in_bin = false;    // the bin exists (else: no segment near)
+    unsigned long generation = 0;  // of the bins
+    Vec3 a0, b0;            // the element's ends when the list was made (m)
+    double r = 0.0, margin = 0.0, skin = 0.0;
+    std::vector<int> ids;
+  };
 
   void clear_segments() {
     segs_.clear();
@@ -249,6 +265,7 @@ class StaticBodies {
     reach_ = std::max(reach, reach_);
     reset_bins();
     bins_valid_ = true;
+    ++generation_;
     if (segs_.empty()) return;
     double rmax = 0.0, lmax = 0.0;
     for (int k = 0; k < 3; ++k) lo_[k] = std::numeric_limits<double>::max();
@@ -280,9 +297,16 @@ class StaticBodies {
 
   // Yarns near element xa-xb of radius r: per yarn the closest segment, when h < margin.
   // The element must be shorter than reach() - r - margin for the lookup at its midpoint to be complete.
-  int element_hits(Vec3 xa, Vec3 xb, double r, double margin, BodyHit out[kMaxHits]) const {
+  // With `cand` (element_candidates of this element, earlier in the step): over its list where it
+  // is still complete (Candidates), else the full lookup; the same hits either way.
+  int element_hits(Vec3 xa, Vec3 xb, double r, double margin, BodyHit out[kMaxHits],
+                   const Candidates *cand = nullptr) const {
     scratch_.clear();
-    element_segment_hits(xa, xb, r, margin, -1, scratch_);
+    if (cand && complete(*cand, xa, xb, r, margin)) {
+      if (cand->in_bin) hits_among(cand->ids, xa, xb, r, margin, -1, scratch_);
+    } else {
+      element_segment_hits(xa, xb, r, margin, -1, scratch_);
+    }
     int yarn[kMaxHits];
     int nhit = 0;
     for (const BodyHit &g : scratch_) insert(out, yarn, nhit, segs_[static_cast<std::size_t>(g.seg)].yarn, g);
@@ -292,11 +316,55 @@ class StaticBodies {
   // segment id and the parameter t of the contact point on it; appended to out. Same completeness
   // condition as element_hits.
   void element_segment_hits(Vec3 xa, Vec3 xb, double r, double margin, int skip, std::vector<BodyHit> &out) const {
+    const std::vector<int> *cand = lookup(0.5 * (xa + xb));
+    if (cand) hits_among(*cand, xa, xb, r, margin, skip, out);
+  }
+  // The Candidates of element xa-xb for element_hits(..., r, margin, ..., &c) while its ends stay
+  // within skin (m) of where they are now.
+  void element_candidates(Vec3 xa, Vec3 xb, double r, double margin, double skin, Candidates &c) const {
+    c.ids.clear();
+    c.valid = bins_valid_ && !segs_.empty() && skin > 0.0;
+    if (!c.valid) return;
+    c.key = bin_key(0.5 * (xa + xb));
+    c.generation = generation_;
+    c.a0 = xa;
+    c.b0 = xb;
+    c.r = r;
+    c.margin = margin;
+    c.skin = skin;
+    const auto it = bins_.find(c.key);
+    c.in_bin = it != bins_.end();
+    if (!c.in_bin) return;
+    // hits_among's tests with margin + skin (also a segment through the element's axis: dist 0)
     const Vec3 mid = 0.5 * (xa + xb);
-    const std::vector<int> *cand = lookup(mid);
-    if (!cand) return;
+    const double half_e = 0.5 * norm(xb - xa), wide = margin + skin;
+    for (int id : it->second) {
+      const Segment &sg = segs_[static_cast<std::size_t>(id)];
+      const Vec3 dc = mid - sg.c;
+      const double reach = half_e + sg.half + sg.radius + r + wide;
+      if (dot(dc, dc) > reach * reach) continue;
+      double se, ty;
+      closest_params_segment_segment(xa, xb, sg.a, sg.b, se, ty);
+      if (norm(lerp(xa, xb, se) - lerp(sg.a, sg.b, ty)) - sg.radius - r < wide) c.ids.push_back(id);
+    }
+  }
+  // c still holds every segment within margin of element xa-xb of radius r (see Candidates); the
+  // ends' moves are compared with 0.999 skin, a margin far above the rounding of the distances
+  bool complete(const Candidates &c, Vec3 xa, Vec3 xb, double r, double margin) const {
+    if (!c.valid || !bins_valid_ || c.generation != generation_ || c.r != r || c.margin != margin) return false;
+    const double lim = 0.999 * c.skin;
+    const Vec3 da = xa - c.a0, db = xb - c.b0;
+    if (!(dot(da, da) < lim * lim && dot(db, db) < lim * lim)) return false;
+    return bin_key(0.5 * (xa + xb)) == c.key;
+  }
+
+ private:
+  // element_segment_hits over the segments ids (a bin's list, or a Candidates list)
+  void hits_among(const std::vector<int> &ids, Vec3 xa, Vec3 xb, double r, double margin, int skip,
+                  std::vector<BodyHit> &out) const {
+    const Vec3 mid = 0.5 * (xa + xb);
     const double half_e = 0.5 * norm(xb - xa);
-    for (int id : *cand) {
+    for (int id : ids) {
       const Segment &sg = segs_[id];
       if (sg.yarn == skip) continue;
       const Vec3 dc = mid - sg.c;
@@ -314,6 +382,8 @@ class StaticBodies {
       out.push_back(hit);
     }
   }
+
+ public:
   // Yarns near a node at x of radius r (single-node fibers).
   int node_hits(Vec3 x, double r, double margin, BodyHit out[kMaxHits]) const {
     const std::vector<int> *cand = lookup(x);
@@ -345,12 +415,15 @@ class StaticBodies {
     bins_used_ = 0;
   }
   static long key(int ix, int iy, int iz) { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
-  const std::vector<int> *lookup(Vec3 p) const {
-    if (segs_.empty() || !bins_valid_) return nullptr;
+  long bin_key(Vec3 p) const {
     const int bx = static_cast<int>(std::floor((p.x - lo_[0]) / size_));
     const int by = static_cast<int>(std::floor((p.y - lo_[1]) / size_));
     const int bz = static_cast<int>(std::floor((p.z - lo_[2]) / size_));
-    auto it = bins_.find(key(bx, by, bz));
+    return key(bx, by, bz);
+  }
+  const std::vector<int> *lookup(Vec3 p) const {
+    if (segs_.empty() || !bins_valid_) return nullptr;
+    auto it = bins_.find(bin_key(p));
     return it == bins_.end() ? nullptr : &it->second;
   }
   // keep the smallest gap per yarn
@@ -377,6 +450,7 @@ class StaticBodies {
   std::unordered_map<long, std::vector<int>> bins_;
   mutable std::vector<BodyHit> scratch_;  // element_hits
   bool bins_valid_ = false;
+  unsigned long generation_ = 0;  // bins built so far (Candidates made before a rebuild are stale)
   std::size_t bins_used_ = 0;  // non-empty bins of the last build
   double size_ = 1.0, lo_[3] = {0, 0, 0}, reach_ = 0.0;
 };
@@ -656,6 +730,23 @@ class StaticContactModel : public BodyContactModel {
                      double stick = kStick)
       : BodyContactModel(law, friction, stick), bodies_(bodies) {}
 
+  // per element the yarn segments that can come near it during this attempt (StaticBodies::
+  // Candidates, within the element's reach of its start position; an element that moves further
+  // is looked up in the bins as before): the Newton iterations then test a few segments instead of
+  // the bin's list (the lookup was a fifth of a lay-down's time, docs/bench/laydown.md)
+  void begin_step(const std::vector<rod::Node> &start, double t0, double h) override {
+    BodyContactModel::begin_step(start, t0, h);
+    const std::size_t n = start.size();
+    cand_.resize(n);
+    const double margin = law_.h_cut;
+    for (std::size_t k = 0; k < n; ++k) {
+      cand_[k].valid = false;
+      if (bodies_.segments().empty() || k + 1 >= n || !start[k].next) continue;
+      const double r = element_reach(start[k], start[k + 1]);
+      bodies_.element_candidates(start[k].x, start[k + 1].x, r, r + margin, r, cand_[k]);
+    }
+  }
+
   void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
     reset();
     const std::size_t n = nodes.size();
@@ -685,7 +776,7 @@ class StaticContactModel : public BodyContactModel {
         const rod::Node &b = nodes[k + 1];
         const bool rect = rect_a || rect_section(b);
         const double r = element_reach(a, b);
-        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits);
+        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits, k < cand_.size() ? &cand_[k] : nullptr);
         for (int q = 0; q < nh; ++q) {
           if (rect) {
             // the gap from the rectangle's extent; its gradient with the contact points sliding
@@ -710,6 +801,7 @@ class StaticContactModel : public BodyContactModel {
 
  private:
   const StaticBodies &bodies_;
+  std::vector<StaticBodies::Candidates> cand_;  // per element (begin_step)
 };
 
 }  // namespace fiberform::physics
