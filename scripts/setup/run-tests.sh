@@ -3,6 +3,9 @@
 # Runs every test of the project: the C++ unit tests (ctest) and the pytest suite, then prints
 # ONE summary line "N passed, M failed" counting both. Exit status 0 only if everything passed.
 # Usage: run-tests.sh BUILD_DIR [--validate]   (--validate adds the long validation runs)
+# FIBERFORM_TEST_WORKERS (default 2): pytest workers (pytest-xdist), each taking whole test files
+# (--dist loadfile: a file's module fixtures run once); 1 runs pytest in this process. MPI ranks
+# of two workers' runs may share the cores, so waiting ranks yield (OMPI_MCA_mpi_yield_when_idle).
 set -uo pipefail
 build=${1:-build}
 shift || true
@@ -24,7 +27,15 @@ c_passed=$((c_total - c_failed))
 echo "== pytest =="
 marker=()
 if [[ "$mode" != "--validate" ]]; then marker=(-m "not validation"); fi
-"$root/.venv/bin/python" -m pytest tests "${marker[@]}" -p no:cacheprovider \
+workers=${FIBERFORM_TEST_WORKERS:-2}
+if ! [[ "$workers" =~ ^[1-9][0-9]?$ ]]; then
+  echo "run-tests.sh: FIBERFORM_TEST_WORKERS=$workers: allowed 1..99" >&2
+  exit 2
+fi
+parallel=()
+if (( workers > 1 )); then parallel=(-n "$workers" --dist loadfile); fi
+export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
+"$root/.venv/bin/python" -m pytest tests "${marker[@]}" "${parallel[@]}" -p no:cacheprovider \
   --junitxml="$logdir/pytest.xml" -q -rfE --durations=10 2>&1 | tee "$logdir/pytest.log"
 py_rc=${PIPESTATUS[0]}
 read -r p_passed p_failed p_skipped < <("$root/.venv/bin/python" - "$logdir/pytest.xml" <<'PY'
