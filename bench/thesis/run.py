@@ -22,6 +22,8 @@ are copied, not awaited by a job dependency): run the same command again then (a
     .venv/bin/python bench/thesis/run.py                      # the full campaign (cluster scale)
     .venv/bin/python bench/thesis/run.py --points A --sections circular --seeds 1
     .venv/bin/python bench/thesis/run.py --collect-only       # tables from what has finished
+    .venv/bin/python bench/thesis/run.py --points S3 --sections circular --seeds 1 --keep
+                                                              # add S3, keep the file's other points
 
 Writes bench/thesis/results/campaign[-reduced].json: the machine, per variant (point, section,
 seed) the collected metrics and stage wall times with the ranks each stage ran on, per point the
