@@ -49,9 +49,8 @@ if TYPE_CHECKING:
     from .sweep import Variant
 
 __all__ = ["Campaign", "Kept", "Point", "PressureSweep", "Sheet", "kept_results", "load_campaign", "merge_pressure",
-           "points",
-           "point_scene", "pressure_scene", "read_experiments", "run_pressure_sweep", "sem_interp", "summarise",
-           "sheet_ratios", "use_fiber_contact"]
+           "points", "point_scene", "pressure_scene", "read_experiments", "run_pressure_sweep", "sem_interp",
+           "summarise", "sheet_ratios", "use_fiber_contact"]
 
 Section = Literal["circular", "rectangular"]
 

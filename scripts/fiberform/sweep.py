@@ -308,7 +308,8 @@ def _read_record(sweep_dir: Path) -> dict[str, Any]:
 
 def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
     """collect.csv (one row per variant: seed, swept values, every stage's metrics, wall time and
-    git revision of the code that made its product; empty where a stage has not finished) and collect.png; returns the paths and the row count."""
+    git revision of the code that made its product; empty where a stage has not finished) and
+    collect.png; returns the paths and the row count."""
     rec = _read_record(sweep_dir)
     root = sweep_dir if sweep_dir.is_dir() else sweep_dir.parent
     paths = list(rec["set"])
