@@ -1132,6 +1132,16 @@ class Stepper {
     }
   }
 
+  // dxs_: the nodes' translations of the current correction rhs_ (scaled back) times factor, zero
+  // for fixed nodes; what the force models' limit() and landings() are asked about
+  void correction_translations(const std::vector<Node> &nodes, double factor) {
+    const std::size_t n = nodes.size();
+    dxs_.assign(n, Vec3{});
+    for (std::size_t k = 0; k < n; ++k)
+      if (!nodes[k].fixed)
+        for (int i = 0; i < 3; ++i) dxs_[k][i] = factor * rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
+  }
+
   // ---- landing predictor (Options::land_predict). The correction y0 = -S^-1 r in rhs_ (scaled)
   // would carry contacts c from outside to deep inside (NodeForceModel::landings). Their forces
   // phi_c g_c are replaced by the linearisation about the landing gap 0 at the iterate's rate,
@@ -1147,15 +1157,6 @@ class Stepper {
   // where Anderson mixing has no history yet: y0 is the plain Newton correction. Contacts whose
   // kappa is not positive (attraction) are left to the limiter. Returns the number of contacts
   // linearised.
-  // dxs_: the nodes' translations of the current correction rhs_ (scaled back) times factor, zero
-  // for fixed nodes; what the force models' limit() and landings() are asked about
-  void correction_translations(const std::vector<Node> &nodes, double factor) {
-    const std::size_t n = nodes.size();
-    dxs_.assign(n, Vec3{});
-    for (std::size_t k = 0; k < n; ++k)
-      if (!nodes[k].fixed)
-        for (int i = 0; i < 3; ++i) dxs_[k][i] = factor * rhs_[k * 6 + i] * tg_.scale[k * 6 + i];
-  }
   static constexpr int kLandRounds = 3;
   static constexpr std::size_t kMaxLandings = 64;
   long predict_landings(const std::vector<Node> &nodes, double gp, double wc) {
