@@ -12,6 +12,11 @@ shift || true
 mode=${1:-}
 root=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$root"
+workers=${FIBERFORM_TEST_WORKERS:-2}
+if ! [[ "$workers" =~ ^[1-9][0-9]?$ ]]; then
+  echo "run-tests.sh: FIBERFORM_TEST_WORKERS=$workers: allowed 1..99" >&2
+  exit 2
+fi
 logdir="$build/test-logs"
 mkdir -p "$logdir"
 
@@ -27,11 +32,6 @@ c_passed=$((c_total - c_failed))
 echo "== pytest =="
 marker=()
 if [[ "$mode" != "--validate" ]]; then marker=(-m "not validation"); fi
-workers=${FIBERFORM_TEST_WORKERS:-2}
-if ! [[ "$workers" =~ ^[1-9][0-9]?$ ]]; then
-  echo "run-tests.sh: FIBERFORM_TEST_WORKERS=$workers: allowed 1..99" >&2
-  exit 2
-fi
 parallel=()
 if (( workers > 1 )); then parallel=(-n "$workers" --dist loadfile); fi
 export OMPI_MCA_mpi_yield_when_idle=${OMPI_MCA_mpi_yield_when_idle:-1}
