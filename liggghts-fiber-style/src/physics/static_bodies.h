@@ -340,12 +340,10 @@ class StaticBodies {
     const double half_e = 0.5 * norm(xb - xa), wide = margin + skin;
     for (int id : it->second) {
       const Segment &sg = segs_[static_cast<std::size_t>(id)];
-      const Vec3 dc = mid - sg.c;
-      const double reach = half_e + sg.half + sg.radius + r + wide;
-      if (dot(dc, dc) > reach * reach) continue;
       double se, ty;
-      closest_params_segment_segment(xa, xb, sg.a, sg.b, se, ty);
-      if (norm(lerp(xa, xb, se) - lerp(sg.a, sg.b, ty)) - sg.radius - r < wide) c.ids.push_back(id);
+      Vec3 d;
+      if (near_pair(sg, xa, xb, mid, half_e, r, wide, se, ty, d) && norm(d) - sg.radius - r < wide)
+        c.ids.push_back(id);
     }
   }
   // c still holds every segment within margin of element xa-xb of radius r (see Candidates); the
@@ -359,6 +357,18 @@ class StaticBodies {
   }
 
  private:
+  // Element xa-xb (midpoint mid, half length half_e, radius r) and segment sg: false when their
+  // bounding spheres stay more than margin apart; else true with the closest points' parameters
+  // se (element), ty (segment) and the separation d (element point - segment point).
+  static bool near_pair(const Segment &sg, Vec3 xa, Vec3 xb, Vec3 mid, double half_e, double r, double margin,
+                        double &se, double &ty, Vec3 &d) {
+    const Vec3 dc = mid - sg.c;
+    const double reach = half_e + sg.half + sg.radius + r + margin;
+    if (dot(dc, dc) > reach * reach) return false;
+    closest_params_segment_segment(xa, xb, sg.a, sg.b, se, ty);
+    d = lerp(xa, xb, se) - lerp(sg.a, sg.b, ty);
+    return true;
+  }
   // element_segment_hits over the segments ids (a bin's list, or a Candidates list)
   void hits_among(const std::vector<int> &ids, Vec3 xa, Vec3 xb, double r, double margin, int skip,
                   std::vector<BodyHit> &out) const {
@@ -367,12 +377,9 @@ class StaticBodies {
     for (int id : ids) {
       const Segment &sg = segs_[id];
       if (sg.yarn == skip) continue;
-      const Vec3 dc = mid - sg.c;
-      const double reach = half_e + sg.half + sg.radius + r + margin;
-      if (dot(dc, dc) > reach * reach) continue;
       double se, ty;
-      closest_params_segment_segment(xa, xb, sg.a, sg.b, se, ty);
-      const Vec3 d = lerp(xa, xb, se) - lerp(sg.a, sg.b, ty);
+      Vec3 d;
+      if (!near_pair(sg, xa, xb, mid, half_e, r, margin, se, ty, d)) continue;
       const double dist = norm(d);
       const double h = dist - sg.radius - r;
       if (h >= margin || !(dist > 0.0)) continue;
