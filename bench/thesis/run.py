@@ -52,7 +52,7 @@ import yaml
 
 from fiberform import campaign as cp
 from fiberform import campaign_report, executors
-from fiberform.errors import FiberformError
+from fiberform.errors import ConfigError, FiberformError
 from fiberform.provenance import atomic_write_text, machine_info
 from fiberform.scene import load_scene
 
@@ -81,6 +81,19 @@ def _read_collect(sweep_dir: Path, fiberform: list[str], build: Path, label: str
         print(f"== {label}: fiberform collect failed: {col.stderr.strip()[-500:]}", file=sys.stderr)
     table = sweep_dir / "collect.csv"
     return list(csv.DictReader(table.read_text().splitlines())) if table.is_file() else []
+
+
+def _kept_file(out: Path, current: dict[str, Any] | None) -> dict[str, Any] | None:
+    """--keep: the results JSON ``out`` (None if there is none yet); ConfigError (exit 2) if it was
+    written with another pressure_press than the campaign's ``current`` (its rows not comparable)."""
+    if not out.is_file():
+        return None
+    previous: dict[str, Any] = json.loads(out.read_text())
+    if previous.get("pressure_press") != current:
+        raise ConfigError(f"--keep: {out} was written with pressure_press {previous.get('pressure_press')}, the "
+                          f"campaign now has {current}: its rows are not comparable; run their points again or give "
+                          "another --out")
+    return previous
 
 
 def main() -> int:
@@ -135,13 +148,8 @@ def _main() -> int:
         return 2
     out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
     current = None if c.pressure_press is None else c.pressure_press.model_dump()
-    if args.keep and out.is_file():  # checked before anything runs (and read again at the end)
-        previous = json.loads(out.read_text())
-        if previous.get("pressure_press") != current:
-            print(f"--keep: {out} was written with pressure_press {previous.get('pressure_press')}, the campaign now "
-                  f"has {current}: its rows are not comparable; run their points again or give another --out",
-                  file=sys.stderr)
-            return 2
+    if args.keep:  # checked before anything runs (and read again at the end)
+        _kept_file(out, current)
     fiberform = [sys.executable, "-m", "fiberform"]
     build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
     if args.runs.is_absolute():
@@ -225,11 +233,8 @@ def _main() -> int:
     kept_from: dict[str, Any] | None = None
     point_rows = [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
                    "press_target_m": p.press_target_m} for p in chosen]
-    if args.keep and out.is_file():  # as it is now: another call may have added to it meanwhile
-        previous = json.loads(out.read_text())
-        if previous.get("pressure_press") != current:
-            print(f"--keep: {out} was rewritten meanwhile with another pressure_press; not kept", file=sys.stderr)
-            return 2
+    # as the file is now: another call may have added to it meanwhile
+    if args.keep and (previous := _kept_file(out, current)) is not None:
         kept = cp.kept_results(previous, set(groups))
         order = {p.name: i for i, p in enumerate(pts)}
         point_rows = sorted(kept.points + point_rows, key=lambda r: order.get(r["name"], len(order)))
