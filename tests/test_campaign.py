@@ -368,6 +368,48 @@ def test_runner_keep_adds_to_an_earlier_results_file(tmp_path: Path) -> None:
     assert out.read_text() == text and not (tmp_path / "runs").exists()
 
 
+@pytest.mark.parametrize("resume", [False, True])
+def test_runner_resume_reaches_every_sweep(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, resume: bool) -> None:
+    """run.py --resume (on the tiny campaign, both seeds of point A): the point's `fiberform sweep`
+    command line carries --resume and the pressure presses' sweep (fiberform.campaign.run_pressure_sweep,
+    which goes through the same run_sweep / submit_sweep) gets resume=True; without --resume
+    neither does. The sweep itself is not run here (a stand-in records its command line), so the
+    pressure presses wait for their lay-downs."""
+    from bench_scripts import load_bench_script
+
+    runner = load_bench_script("bench/thesis/run.py", "thesis_campaign_run")
+    camp = write_tiny_campaign(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    sweeps: list[list[str]] = []
+    real_run = subprocess.run
+
+    def run(cmd: list[str], *args: Any, **kwargs: Any) -> subprocess.CompletedProcess[Any]:
+        if "sweep" in cmd:
+            sweeps.append([str(c) for c in cmd])
+            return subprocess.CompletedProcess(cmd, 0)
+        return real_run(cmd, *args, **kwargs)
+
+    monkeypatch.setattr(runner, "subprocess", type("StandIn", (), {"run": staticmethod(run)}))
+    pressure_calls: list[dict[str, Any]] = []
+    real_pressure = cp.run_pressure_sweep
+
+    def pressure(*args: Any, **kwargs: Any) -> cp.PressureSweep:
+        pressure_calls.append(kwargs)
+        return real_pressure(*args, **kwargs)
+
+    monkeypatch.setattr(cp, "run_pressure_sweep", pressure)
+    monkeypatch.setattr(sys, "argv", ["run.py", "--campaign", str(camp / "campaign.yaml"), "--runs", "runs/c",
+                                      "--points", "A", "--sections", "circular", "--out", str(tmp_path / "r.json"),
+                                      *(["--resume"] if resume else [])])
+    assert runner.main() == 0
+    assert len(sweeps) == 1 and sweeps[0][sweeps[0].index("sweep") + 1].endswith("A-circular.yaml"), sweeps
+    assert ("--resume" in sweeps[0]) is resume, sweeps
+    assert [kw.get("resume") for kw in pressure_calls] == [resume]
+    pending = json.loads((tmp_path / "r.json").read_text())["pending"]
+    assert sorted(pending["A-circular-pressure"]) == ["campaign_A_circular_pressure_000",
+                                                      "campaign_A_circular_pressure_001"]
+
+
 @pytest.mark.system
 def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path) -> None:
     if not (build_dir / "bin" / "fiberdem").is_file():

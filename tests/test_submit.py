@@ -18,6 +18,7 @@ import csv
 import json
 import os
 import re
+import shlex
 import shutil
 import signal
 import socket
@@ -30,7 +31,7 @@ from pathlib import Path
 import pytest
 from cli_helpers import parse_status
 from fiberform import __version__
-from fiberform.cli import main
+from fiberform.cli import build_parser, main
 from fiberform.errors import ConfigError
 from fiberform.executors import (
     JobRecord,
@@ -291,6 +292,44 @@ def test_sweep_array_through_stand_in_qsub(tmp_path: Path, monkeypatch: pytest.M
         v = json.loads((tmp_path / f"runs/pipe-sweep/pipe_00{k}/jobs/jobs.json").read_text())["jobs"]
         assert (v["fabric"]["job_id"], v["flow"]["job_id"], v["flow"]["after"]) == (
             f"1[{k}].pbs-test", f"2[{k}].pbs-test", [f"1[{k}].pbs-test"])
+
+
+def test_sweep_resume_reaches_the_array_scripts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """`sweep --submit slurm --resume` (the demo scene, 2 seeds, up to the lay-down): every array
+    script runs its stage with --resume on its `fiberform prepare STAGE` (split stages: the
+    lay-down's prepare is where a killed run continues from its restart files) or `fiberform STAGE`
+    line, never on `fiberform collect` (no such option); each fiberform line is one the command
+    line accepts, and the scripts equal those written without --resume but for that word."""
+    texts: dict[bool, dict[str, str]] = {}
+    for resume in (False, True):
+        d = tmp_path / f"resume-{resume}"
+        d.mkdir()
+        shutil.copyfile(ROOT / "scenes" / "demo.yaml", d / "s.yaml")
+        rc = _ff(d, monkeypatch, "sweep", "s.yaml", "--seeds", "2", "--to", "laydown", "--submit", "slurm",
+                 "--dry-run", *(["--resume"] if resume else []))
+        assert rc == 0, capsys.readouterr().err
+        jobs = d / "runs/demo-sweep/jobs"
+        texts[resume] = {p.name: p.read_text().replace(str(d), "@DIR@") for p in sorted(jobs.glob("*.slurm"))}
+        for p in jobs.glob("*.slurm"):
+            subprocess.run(["bash", "-n", str(p)], check=True)
+    assert sorted(texts[True]) == ["fabric.slurm", "flow.slurm", "generate.slurm", "laydown.slurm"]
+    parser = build_parser()
+    resumed = []
+    for name, text in texts[True].items():
+        assert text.replace(" --resume", "") == texts[False][name], name
+        for line in text.splitlines():
+            if line.startswith("#") or " -m fiberform " not in line:
+                continue
+            argv = shlex.split(line.removeprefix("exec ").removesuffix(" || status=$?"))
+            assert argv[1:3] == ["-m", "fiberform"], line
+            args = parser.parse_args(argv[3:])  # SystemExit: a line the command line refuses
+            if args.command == "collect":
+                assert "--resume" not in argv, line
+            else:
+                assert args.resume is True, line
+                resumed.append(argv[3:5] if args.command == "prepare" else argv[3:4])
+    assert resumed == [["fabric"], ["prepare", "flow"], ["generate"], ["prepare", "laydown"]]
 
 
 BAD_SWEEP = [

@@ -100,6 +100,25 @@ def test_jobs_run_variants_at_once_with_the_same_results(tmp_path: Path) -> None
             assert np.array_equal(a["fibers/x"][...], b["fibers/x"][...])
 
 
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_resume_reaches_every_variants_stages(tmp_path: Path, jobs: str) -> None:
+    """``sweep --resume`` means ``run --resume`` in every variant, one after the other (the stage
+    context's options) and with ``--jobs 2`` (each variant's ``fiberform run`` gets ``--resume``):
+    the stages run with the option ``resume``, as their products' provenance records (a killed
+    lay-down reads it to continue from its restart files). Without --resume they run without it."""
+    for resume in (False, True):
+        d = tmp_path / f"resume-{resume}"
+        d.mkdir()
+        (d / "s.yaml").write_text(SCENE)
+        r = _ff(d, "sweep", "s.yaml", "--seeds", "2", "--jobs", jobs, *(["--resume"] if resume else []))
+        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+        rec = json.loads((d / "runs" / "sw-sweep" / "sweep.json").read_text())
+        assert len(rec["variants"]) == 2
+        for v in rec["variants"]:
+            options = read_provenance(d / v["output_dir"] / "fibers" / "fibers.h5")["options"]
+            assert bool(options.get("resume")) is resume, (v["name"], options)
+
+
 def test_collect_without_a_sweep_exits_2(tmp_path: Path) -> None:
     r = _ff(tmp_path, "collect", "nowhere")
     assert r.returncode == 2 and "sweep.json" in r.stderr or "not found" in r.stderr, r.stderr

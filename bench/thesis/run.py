@@ -12,7 +12,10 @@ campaign, each laid-down sheet is then pressed a second time, to that pressure
 differs from the point's only in ``press``; its sweep takes over each seed's finished generate,
 fabric, flow, lay-down and permeability folders, so nothing is laid down twice, and runs the press
 and the pressed permeability). Finished stages are skipped, so the same command resumes the
-campaign. ``--jobs N`` runs up to N seeds of a point at once on this machine (``fiberform sweep
+campaign; a lay-down that was killed (a time limit, Ctrl-C, a crash) continues from its last
+LIGGGHTS restart file only with ``--resume`` (passed to every ``fiberform sweep``, the pressure
+presses' included); without it that lay-down starts over and its restart files are removed.
+``--jobs N`` runs up to N seeds of a point at once on this machine (``fiberform sweep
 --jobs``). ``--submit slurm|pbs`` submits each sweep as job arrays instead; the pressure presses of
 a point can only be submitted once its sweep has finished the lay-downs and permeabilities (they
 are copied, not awaited by a job dependency): run the same command again then (and without
@@ -22,6 +25,8 @@ are copied, not awaited by a job dependency): run the same command again then (a
     .venv/bin/python bench/thesis/run.py                      # the full campaign (cluster scale)
     .venv/bin/python bench/thesis/run.py --points A --sections circular --seeds 1
     .venv/bin/python bench/thesis/run.py --collect-only       # tables from what has finished
+    .venv/bin/python bench/thesis/run.py --reduced --resume   # again after a kill: lay-downs go on
+                                                              # from their restart files
     .venv/bin/python bench/thesis/run.py --points S3 --sections circular --seeds 1 --keep
                                                               # add S3, keep the file's other points
 
@@ -119,6 +124,9 @@ def _main() -> int:
     ap.add_argument("--jobs", type=int, default=1, metavar="N",
                     help="seeds of a point run at once on this machine (fiberform sweep --jobs; not with --submit)")
     ap.add_argument("--collect-only", action="store_true", help="run nothing; tabulate what has finished")
+    ap.add_argument("--resume", action="store_true",
+                    help="a killed lay-down continues from its last restart file (fiberform sweep --resume, "
+                         "passed to every sweep); without it, it starts over")
     ap.add_argument("--out", type=Path, help="results JSON (default bench/thesis/results/campaign[-reduced].json)")
     ap.add_argument("--keep", action="store_true",
                     help="keep the points of the existing results JSON that this call does not run (their rows "
@@ -188,6 +196,8 @@ def _main() -> int:
                 cmd += ["--submit", args.submit]
             elif args.jobs > 1:
                 cmd += ["--jobs", str(args.jobs)]
+            if args.resume:
+                cmd.append("--resume")
             print(f"== {group}: fiberform {' '.join(cmd[3:])}", flush=True)
             t0 = time.monotonic()
             proc = subprocess.run(cmd)
@@ -200,7 +210,8 @@ def _main() -> int:
                   f"{groups[group]}", flush=True)
             try:
                 pr = cp.run_pressure_sweep(scene_path, pressure_path, seeds, build,
-                                           lambda line: print(line, flush=True), opts, jobs=args.jobs)
+                                           lambda line: print(line, flush=True), opts, jobs=args.jobs,
+                                           resume=args.resume)
             except FiberformError as exc:
                 failures[f"{group}-pressure"] = str(exc)
                 continue

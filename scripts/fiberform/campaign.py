@@ -266,7 +266,7 @@ class PressureSweep:
 
 def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_dir: Path,
                        echo: Callable[[str], None], submit: BatchOptions | None = None,
-                       jobs: int = 1) -> PressureSweep:
+                       jobs: int = 1, resume: bool = False) -> PressureSweep:
     """The second press of every seed of a point: the sweep of ``pressure_path`` (scene files and
     sweep.json as ``fiberform sweep PRESSURE --seeds N``), each variant's :data:`REUSED_STAGES`
     adopted from the variant of ``fiberform sweep POINT --seeds N`` with the same seed
@@ -274,7 +274,10 @@ def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_
     Only variants whose reused stages are all up to date are started, and only from the press on
     (press, permeability-press), so no lay-down runs here. ``submit``: the press and pressed
     permeability as job arrays (:func:`fiberform.sweep.submit_sweep`), only once every variant
-    is ready (a job array covers all variants). A second call skips what has finished."""
+    is ready (a job array covers all variants). A second call skips what has finished. ``resume``:
+    as ``fiberform sweep --resume`` (passed to :func:`~fiberform.sweep.run_sweep` and
+    :func:`~fiberform.sweep.submit_sweep`; the stages run here lay nothing down, so it only keeps
+    the two sweeps of a point alike)."""
     from .reuse import adopt_stages
     from .stages import StageContext
     from .sweep import expand, run_sweep, submit_sweep, variant_path, write_sweep
@@ -304,11 +307,11 @@ def run_pressure_sweep(point_path: Path, pressure_path: Path, seeds: int, build_
                  "variant's lay-down and permeability (not laid down again here); run again once those are done")
             return out
         submit_sweep(submit, pressure_path, sweep_dir, variants, [], build_dir, "press", None, dry_run=False,
-                     echo=echo)
+                     echo=echo, resume=resume)
         out.started, out.submitted = [v.name for v in variants], True
         return out
     out.failed = run_sweep([variant_path(sweep_dir, v) for v in ready], build_dir, "press", None, echo,
-                           jobs=jobs)
+                           jobs=jobs, resume=resume)
     out.started = [v.name for v in ready]
     return out
 

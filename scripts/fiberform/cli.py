@@ -235,7 +235,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                      args.start, args.stop, None)
     if opts is not None:
         return submit_sweep(opts, base, sweep_dir, variants, sets, Path(args.build_dir), args.start, args.stop,
-                            dry_run=args.dry_run, echo=lambda line: print(line, flush=True))
+                            dry_run=args.dry_run, echo=lambda line: print(line, flush=True), resume=args.resume)
     files = write_sweep(base, sweep_dir, variants, sets)
     print(f"sweep: {len(files)} variant(s) in {sweep_dir} (record {sweep_dir / 'sweep.json'})")
     if args.no_run:
@@ -249,7 +249,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                   "cores: the variants will share cores (MPI ranks that wait for each other slow down badly)",
                   file=sys.stderr)
     failed = run_sweep(files, Path(args.build_dir), args.start, args.stop,
-                       lambda line: print(line, flush=True), jobs=args.jobs)
+                       lambda line: print(line, flush=True), jobs=args.jobs, resume=args.resume)
     if failed:
         print(f"fiberform: error: {len(failed)} variant(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
@@ -399,6 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="start", metavar="STAGE", help="as for run")
     p.add_argument("--to", dest="stop", metavar="STAGE", help="as for run (e.g. --to laydown)")
     p.add_argument("--no-run", action="store_true", help="write the variants and sweep.json only")
+    p.add_argument("--resume", action="store_true",
+                   help="as for run, in every variant: a killed lay-down continues from its last restart file "
+                   "instead of starting over (serial, with --jobs and in the --submit scripts)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="run up to N variants at once on this machine (each as `fiberform run`, output "
                    "in <sweep dir>/scenes/<variant>.log; default 1: one after the other); 1-64")

@@ -19,12 +19,14 @@ Sweeps (``fiberform sweep ... --submit slurm|pbs``): one job array per stage, ta
 (the scene on line k + 1 of ``<sweep dir>/jobs/variants.txt``, picked through SLURM_ARRAY_TASK_ID /
 PBS_ARRAY_INDEX); between stages Slurm ``aftercorr`` (task k after task k of the upstream array),
 PBS ``afterok`` on the whole upstream array (:data:`ARRAY_DEPENDENCY`). Task k's ID is recorded in
-variant k's own ``jobs/jobs.json``.
+variant k's own ``jobs/jobs.json``. ``fiberform sweep --submit ... --resume`` puts ``--resume``
+on each script's ``fiberform prepare`` (or ``fiberform STAGE``) line.
 
 Safety: every value that reaches a script is a validated number, a validated identifier (scene,
-stage, partition, account and qos names) or a path quoted with :func:`shlex.quote` (paths in
-directive lines must also be free of blanks and quotes); anything else is refused with exit 2
-naming the option and the allowed form, before anything is written.
+stage, partition, account and qos names), a fixed option (``--force``, ``--resume``) or a path
+quoted with :func:`shlex.quote` (paths in directive lines must also be free of blanks and quotes);
+anything else is refused with exit 2 naming the option and the allowed form, before anything is
+written.
 """
 
 from __future__ import annotations
@@ -251,13 +253,16 @@ def _dependency(opts: BatchOptions, tasks: int) -> str:
 def render_script(opts: BatchOptions, *, stage: str, scene_name: str, scene_path: Path, workdir: Path,
                   build_dir: Path, jobs_dir: Path, ntasks: int, ranks: int, force: bool,
                   needs: Sequence[str], python: Path, tasks: int = 0,
-                  variants_file: Path | None = None, programs: Sequence[Sequence[Program]] = ()) -> str:
+                  variants_file: Path | None = None, programs: Sequence[Sequence[Program]] = (),
+                  resume: bool = False) -> str:
     """The batch script of one stage (text); ``needs``: its upstream stages. Paths must be absolute.
     ``tasks`` > 0: a job array of that many tasks (a sweep); task k runs the stage on the scene
     on line k + 1 of ``variants_file`` (``scene_path`` is then the sweep's base scene, named in
     the comments only). ``programs``: the program lines of a split stage (one list, or one per
     array task): the script runs ``fiberform prepare``, the lines, ``fiberform collect``; else
-    ``fiberform STAGE`` alone."""
+    ``fiberform STAGE`` alone. ``resume``: that ``fiberform prepare`` (or ``fiberform STAGE``) line
+    carries ``--resume`` (a killed lay-down continues from its restart files; ``collect`` takes no
+    such option)."""
     for p in (scene_path, workdir, build_dir, jobs_dir, python, *([variants_file] if variants_file else [])):
         if not p.is_absolute():
             raise ConfigError(f"internal: {p} is not absolute")
@@ -276,7 +281,8 @@ def render_script(opts: BatchOptions, *, stage: str, scene_name: str, scene_path
     dep = _dependency(opts, tasks)
     scene_arg = '"$scene"' if tasks else shlex.quote(_path(scene_path, "SCENE"))
     py = shlex.quote(_path(python, "python"))
-    tail = ["--build-dir", shlex.quote(_path(build_dir, "--build-dir")), *(["--force"] if force else [])]
+    tail = ["--build-dir", shlex.quote(_path(build_dir, "--build-dir")), *(["--force"] if force else []),
+            *(["--resume"] if resume else [])]
     cmd = [py, "-m", "fiberform", stage, scene_arg, *tail]
     script = jobs_dir / f"{stage}.{SUFFIX[opts.scheduler]}"
     what = (f"Stage {stage} of the {tasks} variants of sweep '{scene_name}' (one array task each)" if tasks
@@ -566,14 +572,16 @@ def array_task_id(scheduler: str, array_id: str, k: int) -> str:
 
 def plan_array_jobs(graphs: Sequence[StageGraph], opts: BatchOptions, *, start: str | None, stop: str | None,
                     sweep_name: str, base_scene: Path, jobs_folder: Path, workdir: Path, python: Path,
-                    states: Mapping[str, QueueState]) -> tuple[list[JobSpec], str]:
+                    states: Mapping[str, QueueState], resume: bool = False) -> tuple[list[JobSpec], str]:
     """One job array per selected stage for the sweep variants (``graphs``: one stage graph per
     variant, in variant order; task k = variant k), in graph order, each array after the arrays of
     the stages it needs (:data:`ARRAY_DEPENDENCY`); and the text of the variants file (one absolute
     scene path a line). Every selected stage is submitted: a task whose variant is already done
     finds its stage up to date and ends at once. ConfigError (nothing written) when the variants
     do not share their stages, a stage of the sweep is still queued or running (``states``), a
-    PBS array would have fewer than 2 tasks, or --ntasks is below a stage's ranks."""
+    PBS array would have fewer than 2 tasks, or --ntasks is below a stage's ranks. ``resume``:
+    every script runs its stage with ``--resume`` (as ``fiberform run --resume`` does: a killed
+    lay-down continues from its restart files instead of starting over)."""
     if not graphs:
         raise ConfigError("internal: a sweep without variants")
     if opts.scheduler == "pbs" and len(graphs) < 2:
@@ -607,7 +615,7 @@ def plan_array_jobs(graphs: Sequence[StageGraph], opts: BatchOptions, *, start: 
         text = render_script(opts, stage=name, scene_name=sweep_name, scene_path=base_scene, workdir=workdir,
                              build_dir=build, jobs_dir=jobs_folder, ntasks=ntasks, ranks=ranks, force=False,
                              needs=after, python=python, tasks=len(graphs), variants_file=variants_file,
-                             programs=progs)
+                             programs=progs, resume=resume)
         specs.append(JobSpec(name, jobs_folder / f"{name}.{SUFFIX[opts.scheduler]}", text, ntasks, after, (),
                              len(graphs)))
     return specs, "".join(f"{s}\n" for s in scenes)

@@ -10,6 +10,9 @@ dir is ``<base output_dir>-sweep``. Variants then run one after the other throug
 (:func:`fiberform.pipeline.run_pipeline`), each skipped stage by stage when up to date, so a sweep is
 resumed by running the same command again; with ``--jobs N`` up to N variants run at once, each as
 its own ``fiberform run`` process writing ``<sweep dir>/scenes/<name>_<k>.log`` (:func:`run_sweep`).
+``--resume`` has the meaning of ``fiberform run --resume`` in every variant (a killed lay-down
+continues from its last restart file instead of starting over), whether the variants run here one
+after the other, with ``--jobs`` or as job arrays (``--submit``).
 ``fiberform collect SWEEP_DIR`` reads each variant's key results (:meth:`Stage.metrics`) and stage
 wall times into ``collect.csv`` and ``collect.png``.
 """
@@ -175,17 +178,19 @@ def variant_ranks(files: Sequence[Path], build_dir: Path, start: str | None, sto
 
 
 def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
-              echo: Callable[[str], None], jobs: int = 1) -> list[str]:
+              echo: Callable[[str], None], jobs: int = 1, resume: bool = False) -> list[str]:
     """Run each variant's pipeline; returns the names of the variants that failed (the others
-    still run). ``jobs`` > 1: up to that many variants at once (:func:`_run_concurrently`)."""
+    still run). ``jobs`` > 1: up to that many variants at once (:func:`_run_concurrently`).
+    ``resume``: as ``fiberform run --resume`` (the stage option ``resume``: a killed lay-down
+    continues from its last restart file instead of starting over)."""
     if jobs > 1 and len(files) > 1:
-        return _run_concurrently(files, build_dir, start, stop, echo, jobs)
+        return _run_concurrently(files, build_dir, start, stop, echo, jobs, resume)
     failed = []
     for i, f in enumerate(files, 1):
         echo(f"== variant {i}/{len(files)}: {f} ==")
         try:
             scene = load_scene(f)
-            ctx = StageContext(scene=scene, scene_path=f, build_dir=build_dir)
+            ctx = StageContext(scene=scene, scene_path=f, build_dir=build_dir, options={"resume": resume})
             stages, forced = plan_run(ctx, start, stop, None)
             run_pipeline(ctx, stages, forced, echo)
         except FiberformError as exc:
@@ -195,14 +200,15 @@ def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: s
 
 
 def _run_concurrently(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
-                      echo: Callable[[str], None], jobs: int) -> list[str]:
-    """Up to ``jobs`` variants at once, each as ``fiberform run SCENE`` (with --from/--to) in a
-    process of its own, its output in the scene file's ``.log``; a line when each starts and
-    ends. On SIGTERM or Ctrl-C (Terminated, KeyboardInterrupt) the running variants get SIGTERM
-    (each stops its programs and records its stage as failed, as `fiberform run` does) and the
-    exception goes on."""
+                      echo: Callable[[str], None], jobs: int, resume: bool = False) -> list[str]:
+    """Up to ``jobs`` variants at once, each as ``fiberform run SCENE`` (with --from/--to, and
+    --resume when ``resume``) in a process of its own, its output in the scene file's ``.log``; a
+    line when each starts and ends. On SIGTERM or Ctrl-C (Terminated, KeyboardInterrupt) the
+    running variants get SIGTERM (each stops its programs and records its stage as failed, as
+    `fiberform run` does) and the exception goes on."""
     cmd0 = [sys.executable, "-m", "fiberform", "run", "--build-dir", str(build_dir)]
     cmd0 += (["--from", start] if start else []) + (["--to", stop] if stop else [])
+    cmd0 += ["--resume"] if resume else []
     env = dict(os.environ)
     here = str(Path(__file__).resolve().parents[1])  # the package's parent: importable in the child
     env["PYTHONPATH"] = here + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
@@ -251,18 +257,19 @@ def variant_path(sweep_dir: Path, v: Variant) -> Path:
 
 def submit_sweep(opts: executors.BatchOptions, base_path: Path, sweep_dir: Path, variants: Sequence[Variant],
                  sets: Sequence[tuple[str, list[Any]]], build_dir: Path, start: str | None, stop: str | None,
-                 *, dry_run: bool, echo: Callable[[str], None]) -> int:
+                 *, dry_run: bool, echo: Callable[[str], None], resume: bool = False) -> int:
     """``fiberform sweep --submit``: one job array per selected stage over the variants
     (:func:`fiberform.executors.plan_array_jobs`), scripts and ``variants.txt`` in
     ``<sweep dir>/jobs/``, array job IDs in its ``jobs.json`` and task k's ID in variant k's own
-    job records (``fiberform status VARIANT``). Everything is checked before anything is written."""
+    job records (``fiberform status VARIANT``). Everything is checked before anything is written.
+    ``resume``: the scripts run each stage with ``--resume`` (as ``fiberform run --resume``)."""
     workdir = Path.cwd()
     sweep_abs = (workdir / sweep_dir).resolve()
     graphs = []
     for v in variants:
         scene = parse_scene(v.data, f"variant {v.name}")
         ctx = StageContext(scene=scene, scene_path=(workdir / variant_path(sweep_dir, v)).absolute(),
-                           build_dir=build_dir)
+                           build_dir=build_dir, options={"resume": resume})
         graphs.append(StageGraph(applicable_stages(scene), ctx))
     jobs_folder = executors.jobs_dir(sweep_abs)
     records = executors.read_records(sweep_abs)
@@ -270,7 +277,7 @@ def submit_sweep(opts: executors.BatchOptions, base_path: Path, sweep_dir: Path,
     specs, listing = executors.plan_array_jobs(
         graphs, opts, start=start, stop=stop, sweep_name=f"{load_scene(base_path).name[:40]}_sweep",
         base_scene=(workdir / base_path).resolve(), jobs_folder=jobs_folder, workdir=workdir,
-        python=executors.default_python(), states=states)
+        python=executors.default_python(), states=states, resume=resume)
     if not dry_run:
         executors.check_submit_program(opts)
     files = write_sweep(base_path, sweep_dir, variants, sets)
