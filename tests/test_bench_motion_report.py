@@ -37,3 +37,40 @@ def test_motion_report_table(tmp_path: Path) -> None:
     # node heights 1..4 mm: percentiles 50 / 90 / 99 of (1, 2, 3, 4) mm
     assert cells[4] == "2500 / 3700 / 3970", cells
     assert "fiber 1 (2 nodes, centre 1500 um) | v = (5.00, 0.00, 0.00) mm/s" in out
+
+
+def test_motion_report_paths(tmp_path: Path) -> None:
+    """--paths: fiber 1 (mass 2) moves +10 um in x, then -4 um: path 14 um, displacement +6 um;
+    fiber 2 (mass 6) sinks 3 um: path 3 um; fiber 3 is gone in the last frame (removed), so it is
+    not listed. With --path-limit 5 the mass share above the limit is 2 / 8."""
+    work = tmp_path / "laydown" / "work"
+    work.mkdir(parents=True)
+    (work / "fibers.nodes").write_text("".join(
+        f"{a} {f} {k} 2 1e-5 1e-5 0 0 0 0 0 1 0 0 0\n" for a, f, k in
+        ((1, 1, 0), (2, 1, 1), (3, 2, 0), (4, 2, 1), (5, 3, 0), (6, 3, 1))))
+
+    def frame(step: int, dx1: float, dz2: float, with3: bool) -> str:
+        rows = [f"1 1 {dx1} 0 1e-3 0 0 0", f"2 1 {1e-4 + dx1} 0 1e-3 0 0 0",
+                f"3 3 0 0 {2e-3 + dz2} 0 0 0", f"4 3 1e-4 0 {2e-3 + dz2} 0 0 0"]
+        rows += ["5 1 0 0 3e-3 0 0 0", "6 1 1e-4 0 3e-3 0 0 0"] if with3 else []
+        return (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(rows)}\nITEM: BOX BOUNDS ff ff ff\n"
+                "0 1\n0 1\n0 1\nITEM: ATOMS id mass x y z vx vy vz\n" + "\n".join(rows) + "\n")
+
+    (work / "traj.dump").write_text(frame(1000, 0.0, 0.0, True) + frame(2000, 0.0, 0.0, True)
+                                    + frame(3000, 10e-6, -1e-6, True) + frame(4000, 6e-6, -3e-6, False))
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "laydown" / "motion_report.py"), "--run",
+                          str(tmp_path), "--paths", "2", "--path-limit", "5"],
+                         capture_output=True, text=True, check=True).stdout
+    assert "from step 2000 to 4000: 2 fibers present throughout; mass share with a path > 5 um: 0.250" in out, out
+    rows = [ln for ln in out.splitlines() if ln.startswith("| 1 |") or ln.startswith("| 2 |")]
+    assert rows == ["| 1 | 2000000000000.00 | 14.0 | 6.0, 0.0, 0.0 |",
+                    "| 2 | 6000000000000.00 | 3.0 | 0.0, 0.0, -3.0 |"], out
+    # --until 3: the frames up to 3 ms; fiber 3 is there throughout, fiber 1's path is 10 um
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "laydown" / "motion_report.py"), "--run",
+                          str(tmp_path), "--paths", "2", "--until", "3"],
+                         capture_output=True, text=True, check=True).stdout
+    assert "from step 2000 to 3000: 3 fibers present throughout" in out and "| 4.0 |" not in out, out
+    assert "| 1 | 2000000000000.00 | 10.0 | 10.0, 0.0, 0.0 |" in out, out
+    bad = subprocess.run([sys.executable, str(ROOT / "bench" / "laydown" / "motion_report.py"), "--run",
+                          str(tmp_path), "--paths", "-1"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--paths" in bad.stderr

@@ -12,8 +12,18 @@ Per snapshot, from each fiber's centre-of-mass velocity (the quantity of fix fib
 * node heights (50, 90, 99 % percentiles, um) of the sheet;
 * with ``--top K``: the K fastest fibers (id, node count, centre height, velocity).
 
+With ``--paths T0`` (ms) a second table: for each fiber present from the first snapshot at or
+after T0 to the last one, the path its centre of mass travelled between them (sum over the
+snapshots) and its displacement (x, y, z); the ``--top`` fibers with the longest paths (10 without
+``--top``), and the mass share of the fibers whose path exceeds ``--path-limit`` (um). A sheet
+whose fibers still migrate (slide over each other, sink into the sheet) is still changing, even
+when its height percentiles no longer move. ``--until T1`` (ms) leaves out the snapshots after T1
+(the same tables from a run that has gone on since).
+
     .venv/bin/python bench/laydown/motion_report.py \\
         --run runs/bench-laydown/A-rectangular-loose-r2-s1 --every 4 --top 3
+    .venv/bin/python bench/laydown/motion_report.py \\
+        --run runs/thesis-campaign/S3-circular-sweep/campaign_S3_circular_000 --every 4 --paths 16 --until 38
 
 Times are the dump steps times the run's time step (``--dt``, default 1e-6 s).
 """
@@ -24,10 +34,11 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from fiberform.fiber_io import NODES_NAME
 from fiberform.fiber_sheet import frame_positions, mass_fraction_speed
-from fiberform.liggghts_log import read_dump
+from fiberform.liggghts_log import Frame, read_dump
 
 
 def main() -> None:
@@ -38,6 +49,12 @@ def main() -> None:
     ap.add_argument("--fraction", type=float, default=0.99, help="mass fraction of the speed measures")
     ap.add_argument("--top", type=int, default=0, help="list the K fastest fibers per snapshot")
     ap.add_argument("--dt", type=float, default=1e-6, help="time step (s)")
+    ap.add_argument("--until", type=float, default=None, metavar="T1",
+                    help="only the snapshots up to T1 (ms): a table of a run that has gone on since")
+    ap.add_argument("--paths", type=float, default=None, metavar="T0",
+                    help="also tabulate the fibers' centre-of-mass paths from T0 (ms) to the last snapshot")
+    ap.add_argument("--path-limit", type=float, default=10.0, metavar="UM",
+                    help="with --paths: the mass share of fibers whose path exceeds this (um)")
     a = ap.parse_args()
     work = a.run / "laydown" / "work"
     fiber_of: dict[int, tuple[int, int]] = {}
@@ -50,6 +67,10 @@ def main() -> None:
         p = line.split()
         fiber_of[int(p[0])] = (int(p[1]), int(p[3]))
     frames = read_dump(work / "traj.dump")
+    if a.until is not None:
+        frames = [fr for fr in frames if fr.step <= round(a.until * 1e-3 / a.dt)]
+    if a.paths is not None and (a.paths < 0.0 or a.path_limit <= 0.0):
+        ap.error("--paths needs T0 >= 0 ms and --path-limit > 0 um")
     print(f"| t (ms) | fibers | mass share > {a.speed * 1e3:.3g} mm/s: all / horizontal / vertical | "
           f"{a.fraction:g}-mass speed |v| / |v_z| (mm/s) | node height 50 / 90 / 99 % (um) |")
     print("|---|---|---|---|---|")
@@ -72,6 +93,44 @@ def main() -> None:
             zc = float(np.mean(height[sel])) * 1e6
             print(f"|  | fiber {fibers[k]} ({int(sel.sum())} nodes, centre {zc:.0f} um) | v = "
                   f"({v[k, 0] * 1e3:.2f}, {v[k, 1] * 1e3:.2f}, {v[k, 2] * 1e3:.2f}) mm/s | | |")
+    if a.paths is not None:
+        paths_table(frames, fiber_of, round(a.paths * 1e-3 / a.dt), a.top or 10, a.path_limit)
+
+
+def paths_table(frames: list[Frame], fiber_of: dict[int, tuple[int, int]], from_step: int, top: int,
+                limit_um: float) -> None:
+    """The fibers' centre-of-mass paths and displacements from the first frame at or after
+    ``from_step`` to the last frame (module docstring)."""
+    span = [fr for fr in frames if fr.step >= from_step]
+    if len(span) < 2:
+        print(f"\n--paths: fewer than two snapshots from step {from_step} on")
+        return
+    centres: list[dict[int, npt.NDArray[np.float64]]] = []
+    mass: dict[int, float] = {}
+    for fr in span:
+        c = fr.columns
+        fid = np.array([fiber_of[int(i)][0] for i in fr.ids])
+        fibers, inv = np.unique(fid, return_inverse=True)
+        m = np.bincount(inv, weights=c["mass"])
+        pos = frame_positions(c)
+        com = np.stack([np.bincount(inv, weights=c["mass"] * pos[:, k]) for k in range(3)], 1) / m[:, None]
+        centres.append({int(f): com[k] for k, f in enumerate(fibers)})
+        mass.update({int(f): float(m[k]) for k, f in enumerate(fibers)})
+    kept = [f for f in centres[0] if all(f in cs for cs in centres)]
+    rows = []
+    for f in kept:
+        track = np.array([cs[f] for cs in centres])
+        rows.append((float(np.linalg.norm(np.diff(track, axis=0), axis=1).sum()), f, track[-1] - track[0]))
+    rows.sort(key=lambda r: -r[0])
+    total = sum(mass[f] for f in kept)
+    moved = sum(mass[f] for p, f, _ in rows if p * 1e6 > limit_um)
+    t0, t1 = span[0].step, span[-1].step
+    print(f"\nCentre-of-mass paths from step {t0} to {t1}: {len(kept)} fibers present throughout; "
+          f"mass share with a path > {limit_um:g} um: {moved / total:.3f}")
+    print("| fiber | mass (ng) | path (um) | displacement x, y, z (um) |")
+    print("|---|---|---|---|")
+    for p, f, d in rows[:top]:
+        print(f"| {f} | {mass[f] * 1e12:.2f} | {p * 1e6:.1f} | {d[0] * 1e6:.1f}, {d[1] * 1e6:.1f}, {d[2] * 1e6:.1f} |")
 
 
 if __name__ == "__main__":
