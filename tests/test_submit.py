@@ -294,6 +294,30 @@ def test_sweep_array_through_stand_in_qsub(tmp_path: Path, monkeypatch: pytest.M
             f"1[{k}].pbs-test", f"2[{k}].pbs-test", [f"1[{k}].pbs-test"])
 
 
+def _resumed_stage_lines(texts: dict[bool, dict[str, str]], forced: str | None) -> list[list[str]]:
+    """The scripts written with --resume (texts[True]) against those without (texts[False]): equal
+    but for that word; every fiberform line one the command line accepts; --resume on each
+    prepare/stage line and never on collect; --force only on the ``forced`` stage's line. Returns
+    the resumed lines' command words (``[stage]`` or ``["prepare", stage]``) in script order."""
+    parser = build_parser()
+    resumed = []
+    for name, text in texts[True].items():
+        assert text.replace(" --resume", "") == texts[False][name], name
+        for line in text.splitlines():
+            if line.startswith("#") or " -m fiberform " not in line:
+                continue
+            argv = shlex.split(line.removeprefix("exec ").removesuffix(" || status=$?"))
+            assert argv[1:3] == ["-m", "fiberform"], line
+            args = parser.parse_args(argv[3:])  # SystemExit: a line the command line refuses
+            if args.command == "collect":
+                assert "--resume" not in argv, line
+            else:
+                assert args.resume is True, line
+                assert bool(args.force) is (argv[3] == forced), line
+                resumed.append(argv[3:5] if args.command == "prepare" else argv[3:4])
+    return resumed
+
+
 def test_sweep_resume_reaches_the_array_scripts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """`sweep --submit slurm --resume` (the demo scene, 2 seeds, up to the lay-down): every array
@@ -314,21 +338,36 @@ def test_sweep_resume_reaches_the_array_scripts(tmp_path: Path, monkeypatch: pyt
         for p in jobs.glob("*.slurm"):
             subprocess.run(["bash", "-n", str(p)], check=True)
     assert sorted(texts[True]) == ["fabric.slurm", "flow.slurm", "generate.slurm", "laydown.slurm"]
-    parser = build_parser()
-    resumed = []
-    for name, text in texts[True].items():
-        assert text.replace(" --resume", "") == texts[False][name], name
-        for line in text.splitlines():
-            if line.startswith("#") or " -m fiberform " not in line:
-                continue
-            argv = shlex.split(line.removeprefix("exec ").removesuffix(" || status=$?"))
-            assert argv[1:3] == ["-m", "fiberform"], line
-            args = parser.parse_args(argv[3:])  # SystemExit: a line the command line refuses
-            if args.command == "collect":
-                assert "--resume" not in argv, line
-            else:
-                assert args.resume is True, line
-                resumed.append(argv[3:5] if args.command == "prepare" else argv[3:4])
+    resumed = _resumed_stage_lines(texts, None)
+    assert resumed == [["fabric"], ["prepare", "flow"], ["generate"], ["prepare", "laydown"]]
+
+
+@pytest.mark.parametrize("scheduler", ["slurm", "pbs"])
+def test_submit_resume_reaches_the_scripts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str], scheduler: str) -> None:
+    """`submit SCENE --scheduler slurm|pbs --resume` (the demo scene up to the lay-down, generate
+    forced so that one line carries --force and --resume): every script runs its stage with --resume
+    on its `fiberform prepare STAGE` (the lay-down's prepare is where a resubmitted job continues
+    from the restart files) or `fiberform STAGE` line, never on `fiberform collect` (no such
+    option); each fiberform line is one the command line accepts, and the scripts and the replay
+    script equal those written without --resume but for that word."""
+    suffix = "slurm" if scheduler == "slurm" else "pbs"
+    texts: dict[bool, dict[str, str]] = {}
+    for resume in (False, True):
+        d = tmp_path / f"resume-{resume}"
+        d.mkdir()
+        shutil.copyfile(ROOT / "scenes" / "demo.yaml", d / "s.yaml")
+        rc = _ff(d, monkeypatch, "submit", "s.yaml", "--scheduler", scheduler, "--to", "laydown", "--dry-run",
+                 "--force", "generate", *(["--resume"] if resume else []))
+        assert rc == 0, capsys.readouterr().err
+        jobs = d / "runs/demo/jobs"
+        texts[resume] = {p.name: p.read_text().replace(str(d), "@DIR@") for p in sorted(jobs.iterdir())}
+        for p in jobs.iterdir():
+            subprocess.run(["bash", "-n", str(p)], check=True)
+    assert sorted(texts[True]) == sorted([*(f"{s}.{suffix}" for s in ("fabric", "flow", "generate", "laydown")),
+                                          f"submit-{scheduler}.sh"])
+    assert texts[True][f"submit-{scheduler}.sh"] == texts[False][f"submit-{scheduler}.sh"]
+    resumed = _resumed_stage_lines(texts, "generate")
     assert resumed == [["fabric"], ["prepare", "flow"], ["generate"], ["prepare", "laydown"]]
 
 

@@ -169,7 +169,7 @@ def _cmd_submit(args: argparse.Namespace) -> int:
     records = executors.read_records(out_dir)
     states = executors.queue_states({s: r for s, r in records.items() if s in graph.stages})
     specs = executors.plan_jobs(graph, opts, start=args.start, stop=args.stop, forced=forced, workdir=workdir,
-                                python=executors.default_python(), states=states)
+                                python=executors.default_python(), states=states, resume=args.resume)
     if not specs:
         print(f"submit: nothing to do: the selected stages ({', '.join(st.name for st in stages)}) are done "
               "(--force STAGE to redo)")
@@ -442,6 +442,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", nargs="*", metavar="STAGE",
                    help="submit the named stages (no name: every selected stage) even when done; they "
                    "run with --force")
+    p.add_argument("--resume", action="store_true",
+                   help="as for run: each script runs its stage with --resume (a killed lay-down continues "
+                   "from its last restart file instead of starting over)")
     p.add_argument("--dry-run", action="store_true",
                    help="write and print the scripts, submit nothing")
     add_build(p)

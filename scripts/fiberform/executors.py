@@ -19,8 +19,9 @@ Sweeps (``fiberform sweep ... --submit slurm|pbs``): one job array per stage, ta
 (the scene on line k + 1 of ``<sweep dir>/jobs/variants.txt``, picked through SLURM_ARRAY_TASK_ID /
 PBS_ARRAY_INDEX); between stages Slurm ``aftercorr`` (task k after task k of the upstream array),
 PBS ``afterok`` on the whole upstream array (:data:`ARRAY_DEPENDENCY`). Task k's ID is recorded in
-variant k's own ``jobs/jobs.json``. ``fiberform sweep --submit ... --resume`` puts ``--resume``
-on each script's ``fiberform prepare`` (or ``fiberform STAGE``) line.
+variant k's own ``jobs/jobs.json``. ``fiberform submit ... --resume`` and ``fiberform sweep
+--submit ... --resume`` put ``--resume`` on each script's ``fiberform prepare`` (or ``fiberform
+STAGE``) line, never on ``fiberform collect``.
 
 Safety: every value that reaches a script is a validated number, a validated identifier (scene,
 stage, partition, account and qos names), a fixed option (``--force``, ``--resume``) or a path
@@ -511,11 +512,13 @@ def _job_tasks(opts: BatchOptions, stage: str, ranks: int, why: str) -> int:
 
 def plan_jobs(graph: StageGraph, opts: BatchOptions, *, start: str | None, stop: str | None,
               forced: set[str], workdir: Path, python: Path,
-              states: Mapping[str, QueueState]) -> list[JobSpec]:
+              states: Mapping[str, QueueState], resume: bool = False) -> list[JobSpec]:
     """The jobs to submit: each selected stage that is not done (or forced, or downstream of a
     stage submitted here), in graph order, with its dependencies. Raises ConfigError (nothing
     written) for a stage already queued or running, an upstream stage that is neither done,
-    selected nor queued, and --ntasks below a stage's ranks."""
+    selected nor queued, and --ntasks below a stage's ranks. ``resume``: every script runs its
+    stage with ``--resume`` (as ``fiberform run --resume`` does: a killed lay-down continues from
+    its restart files instead of starting over)."""
     ctx = graph.ctx
     selected = graph.select(start, stop)
     status = {r.stage: r for r in graph.status()}
@@ -555,7 +558,7 @@ def plan_jobs(graph: StageGraph, opts: BatchOptions, *, start: str | None, stop:
         progs = [_absolute(st.programs(ctx), workdir)] if st.splits else []
         text = render_script(opts, stage=name, scene_name=ctx.scene.name, scene_path=scene_path,
                              workdir=workdir, build_dir=build, jobs_dir=jdir, ntasks=ntasks, ranks=ranks,
-                             force=name in forced, needs=ups, python=python, programs=progs)
+                             force=name in forced, needs=ups, python=python, programs=progs, resume=resume)
         specs.append(JobSpec(name, jdir / f"{name}.{SUFFIX[opts.scheduler]}", text, ntasks,
                              tuple(after_stages), tuple(after_jobs)))
         chosen.add(name)
