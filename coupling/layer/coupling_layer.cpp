@@ -1,13 +1,12 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later
    fiberform coupling layer: see coupling_layer.h and docs/coupling/layer.md. */
 #include "coupling_layer.h"
+#include "patient_wait.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <thread>
 
 namespace fiberform::coupling {
 namespace {
@@ -17,11 +16,6 @@ constexpr int kTagPayload = 7102;
 constexpr int kTagIntercomm = 7100;
 
 Session g_session;
-
-double now_s() {
-  using clock = std::chrono::steady_clock;
-  return std::chrono::duration<double>(clock::now().time_since_epoch()).count();
-}
 
 }  // namespace
 
@@ -119,23 +113,16 @@ Channel::Channel(MPI_Comm inter, double timeout_s, std::string self, std::string
     : inter_(inter), timeout_(timeout_s), self_(std::move(self)), partner_(std::move(partner)) {}
 
 void Channel::wait(MPI_Request *req, int n, const char *what) {
-  const double deadline = now_s() + timeout_;
-  for (;;) {
-    int done = 0;
-    MPI_Testall(n, req, &done, MPI_STATUSES_IGNORE);
-    if (done) return;
-
-    if (now_s() > deadline) {
-      char buf[512];
-      std::snprintf(buf, sizeof buf,
-                    "no answer from %s within the coupling timeout of %g s while %s (the partner "
-                    "crashed, hangs, is not a coupled %s, or one exchange interval takes longer than "
-                    "the timeout: raise `timeout`)",
-                    partner_.c_str(), timeout_, what, partner_.c_str());
-      abort_run(self_, buf);
-    }
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
-  }
+  Patience how;  // polls every 200 us
+  how.deadline_s = clock_s() + timeout_;
+  if (patient_wait(req, n, how)) return;
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "no answer from %s within the coupling timeout of %g s while %s (the partner "
+                "crashed, hangs, is not a coupled %s, or one exchange interval takes longer than "
+                "the timeout: raise `timeout`)",
+                partner_.c_str(), timeout_, what, partner_.c_str());
+  abort_run(self_, buf);
 }
 
 void Channel::send(Kind kind, const std::vector<double> &payload) {
@@ -189,12 +176,9 @@ void Channel::fail(const std::string &message) {
   MPI_Request req[2];
   MPI_Isend(header, 2, MPI_INT64_T, 0, kTagHeader, inter_, &req[0]);
   MPI_Isend(text.data(), static_cast<int>(text.size()), MPI_DOUBLE, 0, kTagPayload, inter_, &req[1]);
-  const double deadline = now_s() + std::min(1.0, timeout_);
-  int done = 0;
-  while (!done && now_s() < deadline) {
-    MPI_Testall(2, req, &done, MPI_STATUSES_IGNORE);
-    if (!done) std::this_thread::sleep_for(std::chrono::microseconds(200));
-  }
+  Patience how;  // polls every 200 us, at most 1 s (the message is printed here anyway)
+  how.deadline_s = clock_s() + std::min(1.0, timeout_);
+  patient_wait(req, 2, how);
   abort_run(self_, message);
 }
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "abi_guard.h"
+#include "patient_wait.h"
 #include "atom.h"
 #include "comm.h"
 #include "domain.h"
@@ -861,6 +862,28 @@ enum RecvCol { R_TAG = 0, R_DX, R_Q = R_DX + 3, R_V = R_Q + 4, R_W = R_V + 3, R_
   R_TI = R_FI + 3, R_N = R_TI + 3 };
 }  // namespace
 
+/* ----------------------------------------------------------------------
+   The return exchange's first collective. A rank without a fiber or cluster to solve waits here
+   for the ranks that solve theirs: once a sheet forms it is one contact cluster, solved by one
+   rank, and the others wait for most of the step. Polling would keep their cores busy, which on
+   virtual CPUs that share a physical core slows the solving rank (docs/bench/machine.md), so they
+   sleep between polls (coupling/layer/patient_wait.h): 50 us of polling first (short waits stay
+   fast), then naps of 10 us doubling up to 0.5 % of the last step period (at most 1 ms), so a
+   rank that waits for a sleeping one is late by at most that (docs/bench/laydown.md, "The waiting
+   rank sleeps"). The data exchanged are the same.
+------------------------------------------------------------------------- */
+
+void FixFiberBeam::wait_for_solvers(MPI_Request *req) {
+  const double now = fiberform::coupling::clock_s();
+  if (last_return_s_ > 0.0) step_period_s_ = now - last_return_s_;
+  last_return_s_ = now;
+  fiberform::coupling::Patience how;
+  how.spin_s = 50e-6;
+  how.nap_min_s = 10e-6;
+  how.nap_max_s = std::clamp(0.005 * step_period_s_, 10e-6, 1e-3);
+  fiberform::coupling::patient_wait(req, 1, how);
+}
+
 void FixFiberBeam::update_owners() {
   int maxfid = -1;
   for (int i = 0; i < atom->nlocal; ++i)
@@ -1145,7 +1168,9 @@ void FixFiberBeam::implicit_step() {
     for (int r = 1; r < nprocs; ++r) bdispl[r] = bdispl[r - 1] + bcount[r - 1];
     std::vector<double> bsend(static_cast<size_t>(bdispl[nprocs - 1] + bcount[nprocs - 1]));
     for (int r = 0; r < nprocs; ++r) std::copy(back[r].begin(), back[r].end(), bsend.begin() + bdispl[r]);
-    MPI_Alltoall(bcount.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, world);
+    MPI_Request req;
+    MPI_Ialltoall(bcount.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, world, &req);
+    wait_for_solvers(&req);
     for (int r = 1; r < nprocs; ++r) rd[r] = rd[r - 1] + rc[r - 1];
     brecv.resize(static_cast<size_t>(rd[nprocs - 1] + rc[nprocs - 1]));
     MPI_Alltoallv(bsend.data(), bcount.data(), bdispl.data(), MPI_DOUBLE, brecv.data(), rc.data(), rd.data(),

@@ -166,6 +166,7 @@ class FixFiberBeam : public Fix {
   void internal_forces_local();    // element forces of the current state into acc_ (ghosts needed)
   void implicit_step();            // gather fibers to their owners, Newton solve, scatter
   void update_owners();            // rank of node 0 of every fiber (after atoms migrate)
+  void wait_for_solvers(MPI_Request *req);  // the return exchange's wait, sleeping (patient_wait)
 
   double **node_ = nullptr;    // per-atom state, NCOL columns
   double **acc_ = nullptr;     // scratch: per-local-atom force/torque from prev (0-5), next (6-11)
@@ -194,6 +195,7 @@ class FixFiberBeam : public Fix {
   bool owners_valid_ = false;
   std::vector<double> sendbuf_, recvbuf_;
   std::vector<int> scount_, rcount_, sdispl_, rdispl_;
+  double last_return_s_ = 0, step_period_s_ = 0;  // wait_for_solvers: the wall time between two steps' exchanges
   double stat_local_[5] = {0, 0, 0, 0, 0};  // Newton iterations, fibers solved, splits, max iterations, tangents
   double stat_total_splits_ = 0;
   double stat_run_[4] = {0, 0, 0, 0};  // since the fix was created: Newton iterations, fibers solved, tangents, limited iterations
