@@ -1,11 +1,17 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """bench/laydown/probe_friction.py writes the lay-down stage's own resumed input with the probe's
-friction setting (laydown.friction_coefficient, laydown.friction_stick) and the solver counters,
-and fiberform.provenance.append_result_rows keeps earlier rows. No binaries needed."""
+friction setting (laydown.friction_coefficient, laydown.friction_stick), the solver counters and
+the final-state dump, refuses bad --builds/--ranks/--repeat/--parallel/--concurrency before
+anything runs, and fiberform.provenance.append_result_rows keeps earlier rows. No binaries needed
+but for the system test: a tiny lay-down (6 fibers, 2 ms) probed for 100 steps with two builds
+(the build and a copy of it) on 1 and 2 ranks, alternating, twice: equal final-state hashes."""
 
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +19,7 @@ import pytest
 import yaml
 
 from bench_scripts import load_bench_script
+from laydown_scenes import tiny_laydown_scene
 from fiberform.provenance import append_result_rows
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -100,3 +107,137 @@ def test_append_result_rows_keeps_earlier_rows(tmp_path: Path) -> None:
     append_result_rows(out, [{"a": 2}, {"a": 3}])
     assert json.loads(out.read_text()) == {"rows": [{"a": 1}, {"a": 2}, {"a": 3}]}
     assert not list(out.parent.glob("*.in_progress"))
+
+
+SCRIPT = ROOT / "bench" / "laydown" / "probe_friction.py"
+#: a tiny lay-down with restart files at steps 1000 and 2000 (2 ms)
+TINY = tiny_laydown_scene("probe_builds", "a", 1, 0.002)
+
+
+def run_script(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True,
+                          errors="replace", timeout=600, check=False)
+
+
+def test_probe_ends_with_the_final_state_dump(probe: Any, run: Path) -> None:
+    """The last line writes every node's id, position and velocity with 17 digits, sorted by id."""
+    last = probe.probe_input(run, 4000, 300, 50, 0.5, 10.0).splitlines()[-1]
+    assert last == ('write_dump all custom final.dump id x y z vx vy vz modify sort id format '
+                    '"%d %.17g %.17g %.17g %.17g %.17g %.17g"'), last
+
+
+def test_build_revision_is_read_only_when_recorded(probe: Any, tmp_path: Path) -> None:
+    assert probe.build_revision(tmp_path) is None
+    (tmp_path / "REVISION").write_text("69802b8\n")
+    assert probe.build_revision(tmp_path) == "69802b8"
+    (tmp_path / "REVISION").write_text("not a commit; rm -rf /\n")
+    assert probe.build_revision(tmp_path) is None
+
+
+def test_combinations_alternate_within_each_repetition(probe: Any) -> None:
+    """A1 B1 A2 B2, then again: ranks outer, builds inner, repetitions outermost."""
+    assert probe.combinations([Path("A"), Path("B")], [1, 2], 2) == [
+        (0, 0, 1), (0, 1, 1), (0, 0, 2), (0, 1, 2), (1, 0, 1), (1, 1, 1), (1, 0, 2), (1, 1, 2)]
+
+
+def test_summary_flags_different_final_states(probe: Any) -> None:
+    def row(b: int, loop: float, cpu: float, state: str) -> dict[str, Any]:
+        return {"friction": 0.5, "friction_stick": None, "build_index": b, "build": f"/b{b}",
+                "ranks": 2, "fiberdem": "sha256:" + "0" * 64, "exit": 0, "loop_s": loop, "cpu_s": cpu,
+                "final_state": state}
+    same = probe.summary([row(0, 20.0, 40.0, "s"), row(1, 18.0, 20.0, "s"), row(0, 17.0, 34.0, "s"),
+                          row(1, 17.5, 19.0, "s"), row(0, 16.0, 33.0, "s"), row(1, 20.0, 22.0, "s")])
+    assert same[0] == "setting friction 0.5"
+    assert "loop 17.00 [16.00-20.00] s, CPU 34.00 [33.00-40.00] s over 3 run(s)" in same[1], same
+    assert "loop 18.00 [17.50-20.00] s, CPU 20.00 [19.00-22.00] s over 3 run(s)" in same[2], same
+    assert same[-1].startswith("  final states: identical"), same
+    differ = probe.summary([row(0, 20.0, 40.0, "s"), row(1, 18.0, 20.0, "t")])
+    assert differ[-1].startswith("  final states: DIFFERENT (2 distinct of 2"), differ
+    missing = probe.summary([row(0, 20.0, 40.0, "s"), {**row(1, 18.0, 20.0, "s"), "final_state": None}])
+    assert "DIFFERENT" in missing[-1], missing
+
+
+@pytest.mark.parametrize(("args", "option", "allowed"), [
+    (["--ranks", "0"], "--ranks", f"1..{os.cpu_count() or 1}"),
+    (["--ranks", str((os.cpu_count() or 1) + 1)], "--ranks", f"1..{os.cpu_count() or 1}"),
+    (["--repeat", "0"], "--repeat", "1..100"),
+    (["--repeat", "101"], "--repeat", "1..100"),
+    (["--builds", "BUILD", "NOWHERE"], "--builds", "bin/fiberdem not found"),
+    (["--builds", "BUILD", "--concurrency", "10"], "--concurrency", "1e5..1e10"),
+    (["--builds", "BUILD", "BUILD", "--parallel", "2"], "--parallel", "one build"),
+    (["--builds", "BUILD", "--repeat", "2", "--parallel", "2"], "--parallel", "--repeat 1"),
+])
+def test_bad_arguments_exit_2_before_anything_runs(run: Path, args: list[str], option: str,
+                                                   allowed: str) -> None:
+    """Exit status 2 naming the option and the allowed values; no probe folder, no results file
+    (BUILD holds a fiberdem that is not a program: a probe that ran would fail otherwise)."""
+    fake = run / "fake-build"
+    (fake / "bin").mkdir(parents=True)
+    (fake / "bin" / "fiberdem").write_text("")
+    args = [str(fake) if a == "BUILD" else str(run / "nowhere") if a == "NOWHERE" else a for a in args]
+    proc = run_script("--run", str(run), "--step", "4000", "--settings", "0.5:", "--probes",
+                      str(run / "probes"), "--out", str(run / "out.json"), *args)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert option in proc.stderr and allowed in proc.stderr, proc.stderr
+    assert not (run / "probes").exists() and not (run / "out.json").exists()
+
+
+@pytest.fixture(scope="module")
+def laydown_run(tmp_path_factory: pytest.TempPathFactory, fiberdem_build: Path,
+                fiberform_cmd: list[str]) -> Path:
+    """A lay-down run folder of the tiny scene (scene.yaml, laydown/work with restart files)."""
+    work = tmp_path_factory.mktemp("probe-builds")
+    (work / "tiny.yaml").write_text(TINY)
+    proc = subprocess.run([*fiberform_cmd, "run", "tiny.yaml", "--build-dir", str(fiberdem_build)],
+                          cwd=work, capture_output=True, text=True, errors="replace", timeout=900)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    run = work / "runs" / "a"
+    assert (run / "laydown" / "work" / "laydown.1000.restart").is_file()
+    (run / "scene.yaml").write_text(TINY)
+    return run
+
+
+@pytest.mark.system
+def test_two_builds_one_and_two_ranks_end_in_the_same_state(laydown_run: Path, fiberdem_build: Path,
+                                                            tmp_path: Path) -> None:
+    """The build and a copy of it (bin/fiberdem a symlink, a REVISION file) on 1 and 2 ranks, twice:
+    the rows come in the alternating order, each with the build, its fiberdem's hash, the ranks,
+    loop and CPU time, and the same final-state hash (the lay-down does not depend on the
+    decomposition); the machine's throughput before and after is recorded."""
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("needs 2 cores")
+    copy = tmp_path / "build-copy"
+    (copy / "bin").mkdir(parents=True)
+    (copy / "bin" / "fiberdem").symlink_to(fiberdem_build / "bin" / "fiberdem")
+    (copy / "REVISION").write_text("69802b8-dirty\n")
+    out = tmp_path / "probe.json"
+    proc = run_script("--run", str(laydown_run), "--step", "1000", "--steps", "100", "--chunk", "50",
+                      "--settings", "0.5:", "--builds", str(fiberdem_build), str(copy), "--ranks", "1", "2",
+                      "--repeat", "2", "--concurrency", "1e5", "--probes", str(tmp_path / "probes"),
+                      "--out", str(out))
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["repetition"], r["build_index"], r["ranks"]) for r in rows] == [
+        (k, b, r) for k in range(2) for r in (1, 2) for b in range(2)]
+    for r in rows:
+        assert r["exit"] == 0 and r["simulated_steps"] == 100, r
+        assert r["build"] == str(fiberdem_build if r["build_index"] == 0 else copy), r
+        assert r["loop_s"] > 0.0 and r["cpu_s"] >= r["cpu_user_s"] > 0.0, r
+        assert 0.0 < r["throughput_cores_before"] <= 2.5 and 0.0 < r["throughput_cores_after"] <= 2.5, r
+        assert r["folder"].endswith(f"-b{r['build_index']}-np{r['ranks']}"), r
+    assert rows[1]["build_revision"] == "69802b8-dirty"
+    assert ("build_revision" in rows[0]) == (fiberdem_build / "REVISION").is_file()
+    assert len({r["fiberdem"] for r in rows}) == 1
+    states = {r["final_state"] for r in rows}
+    assert len(states) == 1 and states.pop().startswith("sha256:"), rows
+    # the dump: every node, sorted by id, position and velocity at full precision
+    dump = (Path(rows[-1]["folder"]) / "final.dump").read_text().splitlines()
+    assert dump[1] == "1100" and dump[8].split() == ["ITEM:", "ATOMS", "id", "x", "y", "z", "vx", "vy", "vz"]
+    atoms = [line.split() for line in dump[9:]]
+    assert len(atoms) == int(dump[3]) == rows[-1]["nodes"] > 0
+    assert [int(a[0]) for a in atoms] == sorted(int(a[0]) for a in atoms)
+    assert all(len(a) == 7 for a in atoms) and any(float(a[6]) != 0.0 for a in atoms)
+    assert max(len(a[3].lstrip("-").replace(".", "").lstrip("0").split("e")[0]) for a in atoms) >= 16
+    summary = proc.stdout[proc.stdout.index("setting friction 0.5\n"):]
+    assert summary.count(" over 2 run(s)") == 4, summary
+    assert "final states: identical (1 distinct of 8 probe(s))" in summary, summary

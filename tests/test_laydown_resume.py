@@ -18,24 +18,10 @@ import numpy as np
 import pytest
 
 from cli_helpers import processes_under, terminate_when
+from laydown_scenes import tiny_laydown_scene
 
 pytestmark = pytest.mark.system
 
-SCENE = """
-name: resume_laydown
-seed: 3
-output_dir: runs/%(out)s
-run: {timestep_s: 1.0e-7, duration_s: 1.0e-3}
-domain: {lo_m: [0.0, 0.0, 0.0], hi_m: [1.0e-3, 1.0e-3, 3.437e-3]}
-fibers: {count: 6, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
-         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}
-fiber_generation: {placement_lo_m: [0.0, 0.0, 2.66e-3], placement_hi_m: [1.0e-3, 1.0e-3, 2.9e-3]}
-fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}
-flow: {delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}
-laydown: {max_time_s: 0.006, check_interval_s: 5.0e-4, settle_speed_m_s: 1.0e-9,
-          settle_checks: 3, timestep_s: 1.0e-6, restart_interval_s: 1.0e-3, ranks: %(ranks)d}
-contact: {model: fiber_dlvo, terms: [steric]}
-"""
 TOL_RESUME = 1e-9  # m: the resumed run repeats the uninterrupted one (restart files are exact)
 TOL_RANKS = 1e-9   # m (measured: identical; each fiber is solved whole on one rank)
 
@@ -56,7 +42,7 @@ def snapshot(step: int, fibers: list[int]) -> str:
 
 def _scene(work: Path, out: str, ranks: int) -> Path:
     p = work / f"{out}.yaml"
-    p.write_text(SCENE % {"out": out, "ranks": ranks})
+    p.write_text(tiny_laydown_scene("resume_laydown", out, ranks, 0.006))
     return p
 
 
