@@ -13,11 +13,17 @@ their scenes and the per-sheet ratios, against the thesis' numbers and hand valu
 - statistics over seeds and ratios from hand-made collect rows, the pressure press's rows joined
   by seed (and refused when they are not the same sheet); an earlier results file's other points
   kept (run.py --keep);
+- the SEM convention: every point, the sheet points too, is a support point at f x its simulated
+  mass (S3: 45.1 ug -> 13.69 ug, next to sheet 1's 13.5 ug); hand interpolations, None outside
+  the support range, points at one SEM mass merged deterministically; a results JSON written
+  before ``sem_mass_kg`` / ``sem_factor`` is kept and redrawn (``run.py --collect-only --keep``
+  on the committed bench/thesis/results/campaign.json, stripped of both fields);
 - end to end on a tiny campaign: both presses of one laid-down sheet, the lay-down not run twice.
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 import statistics
@@ -119,7 +125,7 @@ def test_summary_and_ratios_from_hand_rows(setup: tuple[cp.Campaign, list[cp.She
     s = cp.summarise(collected)
     assert s["S2-circular"]["permeability_cfm"] == {"mean": 250.0, "sd": statistics.stdev([240.0, 260.0]), "n": 2.0}
     assert s["A-circular"]["permeability_cfm"]["sd"] == 0.0
-    rows = {r["sheet"]: r for r in cp.sheet_ratios(c, sheets, pts, s, "circular")}
+    rows = {r["sheet"]: r for r in cp.sheet_ratios(sheets, pts, s, "circular")}
     assert rows[2]["direct"]["ratio"] == pytest.approx(250.0 / 255.0)
     assert rows[1]["direct"] is None
     # SEM: A maps to 10.84 ug, C to 54.2 ug: sheets 2 (27.1) and 3 (45.1) lie between, linearly
@@ -130,6 +136,93 @@ def test_summary_and_ratios_from_hand_rows(setup: tuple[cp.Campaign, list[cp.She
         assert rows[sheet]["sem"]["mean"] == pytest.approx(want, rel=1e-9)
     assert rows[1]["sem"] is not None  # 13.5 ug lies between A and C too
     assert rows[4]["sem"] is None and rows[7]["sem"] is None  # beyond case C
+
+
+def test_every_point_has_its_sem_mass(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    """sem_mass_kg = simulated mass x 27.1 / 89.25 for every point; for a case the SEM-mapped mass
+    its press targets (experimental_mass_kg), for a sheet point not its own mass."""
+    _, _, pts = setup
+    by = {p.name: p for p in pts}
+    f = 27.1 / 89.25
+    for p in pts:
+        assert p.sem_mass_kg == pytest.approx(p.mass_kg * f, rel=1e-12), p.name
+        if not p.name.startswith("S"):
+            assert p.sem_mass_kg == pytest.approx(p.experimental_mass_kg, rel=1e-12), p.name
+    # by hand: 13.5 x 27.1 / 89.25, 27.1 x 27.1 / 89.25, 45.1 x 27.1 / 89.25 (ug)
+    assert by["S1"].sem_mass_kg == pytest.approx(4.0992e-9, rel=1e-4)
+    assert by["S2"].sem_mass_kg == pytest.approx(8.2287e-9, rel=1e-4)
+    assert by["S3"].sem_mass_kg == pytest.approx(13.694e-9, rel=1e-4)
+    assert by["A"].sem_mass_kg == pytest.approx(10.84e-9, rel=1e-4)
+    assert by["S3"].experimental_mass_kg == pytest.approx(45.1e-9, rel=1e-12)  # direct: its own
+
+
+def test_sem_value_from_a_case_and_a_sheet_point(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    """With case A and S3 finished only: A stands for 35.7 x f = 10.84 ug, S3 for 45.1 x f = 13.69
+    ug (f = 27.1 / 89.25); sheet 1 (13.5 ug) lies between them, every other sheet beyond S3."""
+    c, sheets, pts = setup
+    s = cp.summarise({"A-circular": [{"permeability_cfm": "700.0"}],
+                      "S3-circular": [{"permeability_cfm": "400.0"}, {"permeability_cfm": "420.0"}]})
+    rows = {r["sheet"]: r for r in cp.sheet_ratios(sheets, pts, s, "circular")}
+    f = 27.1 / (2.5 * 35.7)
+    ma, m3 = 35.7 * f, 45.1 * f  # ug
+    want = 700.0 + (13.5 - ma) / (m3 - ma) * (410.0 - 700.0)  # S3: mean of 400 and 420
+    assert want == pytest.approx(429.7, abs=0.1)  # 700 - 290 x 2.66 / 2.854
+    assert rows[1]["sem"]["mean"] == pytest.approx(want, rel=1e-9)
+    assert rows[1]["sem"]["ratio"] == pytest.approx(want / 310.0, rel=1e-9)
+    assert [p["point"] for p in rows[1]["sem"]["support"]] == ["A", "S3"]
+    assert [p["sem_mass_kg"] for p in rows[1]["sem"]["support"]] == pytest.approx([ma * 1e-9, m3 * 1e-9], rel=1e-9)
+    assert [p["mean"] for p in rows[1]["sem"]["support"]] == [700.0, 410.0]
+    assert all(rows[k]["sem"] is None for k in range(2, 8))  # 27.1 ug and up: beyond S3's 13.69 ug
+    assert rows[3]["direct"]["ratio"] == pytest.approx(410.0 / 175.0)  # S3 is sheet 3's direct point too
+    assert rows[1]["direct"] is None
+    # only A: no range around sheet 1; the pressed metric: no point has finished it
+    only_a = cp.summarise({"A-circular": [{"permeability_cfm": "700.0"}]})
+    assert all(r["sem"] is None for r in cp.sheet_ratios(sheets, pts, only_a, "circular"))
+    assert all(r["sem"] is None for r in cp.sheet_ratios(sheets, pts, s, "circular", "permeability_press_cfm"))
+    # the rectangular section has its own support points: none here
+    assert all(r["sem"] is None for r in cp.sheet_ratios(sheets, pts, s, "rectangular"))
+
+
+def test_sem_support_of_the_points_run_so_far(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
+    """A, S1 and S2 (the points of bench/thesis/results/campaign.json) stand for 10.84, 4.10 and
+    8.23 ug in the SEM convention, all below sheet 1 (13.5 ug): no sheet has an SEM value yet.
+    A point at a sheet's own SEM mass (B = sheet 2) is that sheet's value alone, also beside
+    others."""
+    c, sheets, pts = setup
+    s = cp.summarise({g: [{"permeability_cfm": x}] for g, x in
+                      (("A-circular", "740"), ("S1-circular", "765"), ("S2-circular", "745"))})
+    assert all(r["sem"] is None for r in cp.sheet_ratios(sheets, pts, s, "circular"))
+    s = cp.summarise({g: [{"permeability_cfm": x}] for g, x in
+                      (("B-circular", "600"), ("S2-circular", "745"), ("C-circular", "500"))})
+    rows = {r["sheet"]: r for r in cp.sheet_ratios(sheets, pts, s, "circular")}
+    assert rows[2]["sem"]["mean"] == pytest.approx(600.0, rel=1e-9)
+    assert [p["point"] for p in rows[2]["sem"]["support"]] == ["B"]
+    assert rows[1]["sem"]["mean"] == pytest.approx(745.0 + (13.5 - 8.2287) / (27.1 - 8.2287) * (600.0 - 745.0),
+                                                   rel=1e-4)
+    assert [p["point"] for p in rows[1]["sem"]["support"]] == ["S2", "B"]
+    assert [p["point"] for p in rows[3]["sem"]["support"]] == ["B", "C"]
+    assert rows[4]["sem"] is None  # C: 178.5 x 27.1 / 89.25 = 54.2 ug < 62.9 ug
+
+
+def test_sem_points_at_one_mass_are_merged() -> None:
+    """Two points at the same SEM mass (within 1e-9 relative) are one support point: the mean of
+    their means, their names in sorted order, whatever order they come in."""
+    summary = {"X-circular": {"m": {"mean": 100.0}}, "Y-circular": {"m": {"mean": 300.0}},
+               "Z-circular": {"m": {"mean": 500.0}}, "W-circular": {"other": {"mean": 1.0}}}
+    named = [("Y", 1e-8 * (1 + 1e-12)), ("X", 1e-8), ("Z", 2e-8), ("W", 1.5e-8)]
+    for order in (named, named[::-1]):
+        sup = cp.sem_support(order, summary, "circular", "m")
+        assert [p.names for p in sup] == [("X", "Y"), ("Z",)]  # W has no "m"
+        assert [p.mean for p in sup] == [200.0, 500.0]
+        assert sup[0].sem_mass_kg == pytest.approx(1e-8, rel=1e-11)
+        v = cp.sem_value(sup, 1.5e-8)
+        assert v is not None and v[0] == pytest.approx(350.0) and [p.row()["point"] for p in v[1]] == ["X+Y", "Z"]
+    sup = cp.sem_support(named, summary, "circular", "m")
+    # the ends: widened by 1e-6 relative, one support point there; beyond: None
+    assert cp.sem_value(sup, 1e-8 * (1 - 5e-7))[1][0].names == ("X", "Y")  # type: ignore[index]
+    assert cp.sem_value(sup, 2e-8 * (1 + 5e-7))[1][0].names == ("Z",)  # type: ignore[index]
+    assert cp.sem_value(sup, 1e-8 * (1 - 2e-6)) is None and cp.sem_value(sup, 2e-8 * (1 + 2e-6)) is None
+    assert cp.sem_value([], 1e-8) is None
 
 
 def test_kept_results_take_over_other_groups(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]]) -> None:
@@ -157,10 +250,20 @@ def test_kept_results_take_over_other_groups(setup: tuple[cp.Campaign, list[cp.S
     assert kept.failures == {"S2-circular-pressure": "x"} and kept.pending == previous["pending"]
     s = cp.summarise(kept.collected)
     assert s["S2-circular"]["permeability_cfm"]["mean"] == 250.0
-    rows = {r["sheet"]: r for r in cp.sheet_ratios(c, sheets, pts, s, "circular")}
+    rows = {r["sheet"]: r for r in cp.sheet_ratios(sheets, pts, s, "circular")}
     assert rows[2]["direct"]["ratio"] == pytest.approx(250.0 / 255.0)
     # nothing kept when the call runs every group
     assert not cp.kept_results(previous, {"A-circular", "S2-circular", "A-rectangular"}).variants
+    # point rows of a file written before sem_mass_kg: mass_kg x f, f the file's sem_factor or the
+    # campaign's; a row with sem_mass_kg keeps it
+    old = {**previous, "points": [{"name": "A", "mass_kg": 35.7e-9}, {"name": "S2", "mass_kg": 27.1e-9}]}
+    kept = cp.kept_results(old, set(), 27.1 / 89.25)
+    assert [p["sem_mass_kg"] for p in kept.points] == pytest.approx([10.84e-9, 27.1e-9 * 27.1 / 89.25], rel=1e-12)
+    assert "sem_mass_kg" not in old["points"][0]  # the earlier file's rows are not changed
+    kept = cp.kept_results({**old, "sem_factor": 0.5}, set(), 27.1 / 89.25)
+    assert [p["sem_mass_kg"] for p in kept.points] == pytest.approx([17.85e-9, 13.55e-9], rel=1e-12)
+    kept = cp.kept_results({**old, "points": [{"name": "A", "mass_kg": 35.7e-9, "sem_mass_kg": 1e-9}]}, set(), 0.3)
+    assert kept.points == [{"name": "A", "mass_kg": 35.7e-9, "sem_mass_kg": 1e-9}]
 
 
 def test_campaign_file_errors_name_the_field(tmp_path: Path) -> None:
@@ -268,7 +371,7 @@ def test_pressure_rows_join_by_seed(setup: tuple[cp.Campaign, list[cp.Sheet], li
     assert s["S2-circular"]["pressure_pressed_thickness_above_fabric_m"]["mean"] == pytest.approx(3.5e-5)
     assert s["S2-circular"]["sheet_thickness_above_fabric_m"] == {"mean": 6e-5, "sd": 0.0, "n": 4.0}
     assert s["S2-circular"]["permeability_press_cfm"]["mean"] == 540.0
-    r = {x["sheet"]: x for x in cp.sheet_ratios(c, sheets, pts, s, "circular", "pressure_permeability_press_cfm")}
+    r = {x["sheet"]: x for x in cp.sheet_ratios(sheets, pts, s, "circular", "pressure_permeability_press_cfm")}
     assert r[2]["direct"]["ratio"] == pytest.approx(410.0 / 255.0)
 
 
@@ -359,6 +462,12 @@ def test_runner_keep_adds_to_an_earlier_results_file(tmp_path: Path) -> None:
     assert res["summary"]["S2-circular"]["permeability_cfm"]["mean"] == 5.0
     sheet2 = next(r for r in res["sheets_unpressed"]["circular"] if r["sheet"] == 2)
     assert sheet2["direct"]["ratio"] == pytest.approx(5.0 / 400.0)  # TINY_EXPERIMENTS: sheet 2 measured 400 CFM
+    # SEM factor: sheet 2 (1.0 ug) / case B (2 x 2.2 ug); the earlier S2 row (no sem_mass_kg) gets
+    # its 1 ug x f, the new row of A its 2.2 ug x f = 0.5 ug (sheet 1's mass)
+    assert res["sem_factor"] == pytest.approx(1.0 / 4.4, rel=1e-12)
+    assert [p["sem_mass_kg"] for p in res["points"]] == pytest.approx([0.5e-9, 1e-9 / 4.4], rel=1e-12)
+    # S2 (SEM 0.227 ug) is the only support point: below both sheets (0.5 and 1.0 ug)
+    assert all(r["sem"] is None for r in res["sheets_unpressed"]["circular"])
     # another pressure_press: refused, the file kept byte for byte
     earlier["pressure_press"] = {**earlier["pressure_press"], "target_pressure_Pa": 1.0}
     out.write_text(text := json.dumps(earlier))
@@ -366,6 +475,52 @@ def test_runner_keep_adds_to_an_earlier_results_file(tmp_path: Path) -> None:
     bad = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and "--keep" in bad.stderr and "pressure_press" in bad.stderr, bad.stderr
     assert out.read_text() == text and not (tmp_path / "runs").exists()
+    # another SEM factor recorded in the earlier file (its pressure_press the campaign's): refused
+    # the same way
+    earlier["pressure_press"] = c.pressure_press.model_dump()
+    out.write_text(text := json.dumps({**earlier, "sem_factor": 0.5}))
+    bad = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "--keep" in bad.stderr and "SEM factor" in bad.stderr, bad.stderr
+    assert out.read_text() == text and not (tmp_path / "runs").exists()
+
+
+def test_runner_collect_only_keeps_an_old_results_file(tmp_path: Path) -> None:
+    """run.py --collect-only --keep (every point, both sections) on the committed
+    bench/thesis/results/campaign.json as written before sem_mass_kg and sem_factor existed (both
+    taken out here, whatever the committed file holds by then), on a machine without its run
+    folders (runs/ under tmp_path): every group of the file is kept, as a group without a sweep
+    folder here is not replaced by --collect-only; its point rows get mass_kg x 27.1 / 89.25, the
+    file the SEM factor, and the figures and tables are drawn."""
+    committed = json.loads((ROOT / "bench" / "thesis" / "results" / "campaign.json").read_text())
+    old = copy.deepcopy(committed)
+    old.pop("sem_factor", None)
+    for p in old["points"]:
+        p.pop("sem_mass_kg", None)
+    c = cp.load_campaign(THESIS / "campaign.yaml")
+    assert c.pressure_press is not None
+    old["pressure_press"] = c.pressure_press.model_dump()  # the format is tested here, not the press
+    out = tmp_path / "results" / "campaign.json"
+    out.parent.mkdir()
+    out.write_text(json.dumps(old))
+    proc = subprocess.run([sys.executable, str(RUNNER), "--runs", "runs/c", "--collect-only", "--keep",
+                           "--out", str(out)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    res = json.loads(out.read_text())
+    groups = sorted({f"{v['point']}-{v['section']}" for v in old["variants"]})
+    assert groups and res["kept_from"]["groups"] == groups
+    assert res["variants"] == old["variants"]
+    f = 27.1 / 89.25
+    assert res["sem_factor"] == pytest.approx(f, rel=1e-12)
+    by = {p["name"]: p for p in res["points"]}
+    assert len(by) == len(res["points"]) == 14  # every point of the call once, the kept ones too
+    for p in old["points"]:
+        assert by[p["name"]]["sem_mass_kg"] == pytest.approx(p["mass_kg"] * f, rel=1e-12), p["name"]
+        assert by[p["name"]]["experimental_mass_kg"] == pytest.approx(p["experimental_mass_kg"], rel=1e-12)
+    for g in groups:
+        assert res["summary"][g]["permeability_cfm"]["mean"] == pytest.approx(
+            old["summary"][g]["permeability_cfm"]["mean"], rel=1e-12)
+    for name in ("campaign-fig412-thickness.png", "campaign-fig413-permeability.png", "campaign.md"):
+        assert (out.parent / name).is_file(), name
 
 
 @pytest.mark.parametrize("resume", [False, True])

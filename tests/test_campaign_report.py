@@ -9,12 +9,17 @@
   the hand ratios of both conventions, also for the pressure press;
 - the figures plot exactly the hand values at the right masses / fiber counts, error bars = sd
   (read back from the drawn Axes), and the PNG files are written (also for an empty campaign,
-  which then shows the experiments alone).
+  which then shows the experiments alone);
+- SEM convention: every point, the sheet points too, is drawn and interpolated at its SEM mass
+  f x its simulated mass (S1 at 4.10 ug); a results JSON written before ``sem_mass_kg`` and
+  ``sem_factor`` existed takes f from the campaign definition it names, and without that the
+  case points alone (at their SEM-mapped ``experimental_mass_kg``), without failing.
 """
 
 from __future__ import annotations
 
 import copy
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +45,7 @@ def _st(mean: float, sd: float, n: int) -> dict[str, float]:
 #: the compared metrics are the thicknesses above the fabric top; the 5-95 % spans (9xx um, never
 #: expected in a figure or table) stay in the summary as the runner collects them
 DATA: dict[str, Any] = {
-    "command": "--collect-only", "seeds": 3, "failures": {},
+    "command": "--collect-only", "seeds": 3, "failures": {}, "sem_factor": F,
     "pressure_press": {"target_pressure_Pa": 410e3, "pressure_rate_Pa_s": None, "hold_time_s": 1e-3,
                        "release_time_s": 1e-3},
     "points": [{"name": "A", "mass_kg": 35.7e-9, "experimental_mass_kg": 35.7e-9 * F, "press_target_m": 2e-6},
@@ -74,7 +79,9 @@ DATA: dict[str, Any] = {
     "sheets_unpressed": {
         "circular": [{"sheet": 1, "measured_cfm": 310.0, "measured_thickness_m": 0.0,
                       "direct": {"mean": 620.0, "sd": 10.0, "n": 3.0, "ratio": 2.0},
-                      "sem": {"mean": 651.0, "ratio": 2.1}},
+                      "sem": {"mean": 651.0, "ratio": 2.1,
+                              "support": [{"point": "A", "sem_mass_kg": 35.7e-9 * F, "mean": 700.0},
+                                          {"point": "C", "sem_mass_kg": 178.5e-9 * F, "mean": 500.0}]}},
                      {"sheet": 2, "measured_cfm": 255.0, "measured_thickness_m": 10e-6,
                       "direct": {"mean": 510.0, "sd": 0.0, "n": 1.0, "ratio": 2.0}, "sem": None},
                      {"sheet": 4, "measured_cfm": 105.0, "measured_thickness_m": 93e-6, "direct": None, "sem": None}],
@@ -112,25 +119,28 @@ def test_table_shows_the_json_values_and_dashes() -> None:
     md = cr.markdown(DATA, SHEETS)
     t = _table(md, "circular, unpressed")
     assert list(t) == [str(k) for k in range(1, 8)]
-    # mass, measured CFM, direct sim, ratio, SEM sim, ratio, measured / direct / SEM thickness
+    # mass, measured CFM, direct sim, ratio, SEM sim, ratio, SEM support, measured / direct / SEM
+    # thickness; SEM thickness: the sheet point S1 (250 um) is a support point at 4.10 ug, below
+    # sheet 1 (13.5 ug): sheet 1 lies between A (10.84 ug) and C (54.2 ug)
     a = (13.5 - 35.7 * F) / (178.5 * F - 35.7 * F)  # sheet 1 between cases A and C
-    assert t["1"] == ["13.5", "310", "620.0 +- 10.0 (n=3)", "2.00", "651.0", "2.10", "0",
+    assert t["1"] == ["13.5", "310", "620.0 +- 10.0 (n=3)", "2.00", "651.0", "2.10", "A 10.84, C 54.20", "0",
                       "250.0 +- 20.0 (n=3)", f"{244.6 + a * (300.0 - 244.6):.1f}"]
     assert t["1"][-1] == "248.0"  # by hand: 244.6 + 2.66 / 43.36 x 55.4
-    assert t["2"][:7] == ["27.1", "255", "510.0 +- 0.0 (n=1)", "2.00", "-", "-", "10"]
-    assert t["2"][7] == "-"  # S2 has no thickness
-    assert t["4"] == ["62.9", "105", "-", "-", "-", "-", "93", "-", "-"]  # beyond case C
+    assert t["2"][:8] == ["27.1", "255", "510.0 +- 0.0 (n=1)", "2.00", "-", "-", "-", "10"]
+    assert t["2"][8] == "-"  # S2 has no thickness
+    assert t["4"] == ["62.9", "105", "-", "-", "-", "-", "-", "93", "-", "-"]  # beyond case C
     p = _table(md, "circular, pressed to thickness")
-    assert p["1"][2:5] == ["600.0 +- 5.0 (n=2)", "1.94", "-"] and p["1"][7] == "100.0 +- 0.0 (n=2)"
-    assert p["3"][2:] == ["-"] * 4 + ["82", "-", "-"]  # no pressed case points: no SEM thickness either
+    assert p["1"][2:5] == ["600.0 +- 5.0 (n=2)", "1.94", "-"] and p["1"][8] == "100.0 +- 0.0 (n=2)"
+    # S1's pressed thickness is the only support point: 4.10 ug, no sheet there
+    assert p["3"][2:] == ["-"] * 5 + ["82", "-", "-"]
     # pressed to pressure: S1 450 +- 15 CFM (450 / 310 = 1.45), SEM 656.7 (2.12); thickness 60 um
     # direct, SEM 200 + (100 - 200) x 2.66 / 43.36 = 193.9 um
     q = _table(md, "circular, pressed to pressure")
-    assert q["1"] == ["13.5", "310", "450.0 +- 15.0 (n=2)", "1.45", "656.7", "2.12", "0", "60.0 +- 4.0 (n=2)",
-                      "193.9"]
-    assert q["2"][2:6] == ["-"] * 4 and q["2"][7] == "-"  # no S2 pressure press
-    assert q["2"][8] == "162.5"  # SEM thickness at sheet 2 (27.1 ug): 200 - 100 x 16.26 / 43.36
-    assert q["4"][2:] == ["-"] * 4 + ["93", "-", "-"]  # beyond case C
+    assert q["1"] == ["13.5", "310", "450.0 +- 15.0 (n=2)", "1.45", "656.7", "2.12", "-", "0",
+                      "60.0 +- 4.0 (n=2)", "193.9"]  # this row's "sem" records no support points
+    assert q["2"][2:7] == ["-"] * 5 and q["2"][8] == "-"  # no S2 pressure press
+    assert q["2"][9] == "162.5"  # SEM thickness at sheet 2 (27.1 ug): 200 - 100 x 16.26 / 43.36
+    assert q["4"][2:] == ["-"] * 5 + ["93", "-", "-"]  # beyond case C
     assert "410 kPa" in md.split("## ")[0]
     r = _table(md, "rectangular, unpressed")
     assert r["1"][2:4] == ["400.0 +- 8.0 (n=2)", "1.29"]
@@ -153,17 +163,18 @@ def test_table_through_the_runner_functions() -> None:
     cc, _ = cp.merge_pressure([{"seed": "1", "permeability_cfm": "500"}],
                               [{"seed": "1", "permeability_cfm": "500", "permeability_press_cfm": "300"}])
     summary = cp.summarise({"S1-circular": s1, "A-circular": a, "C-circular": cc})
-    data = {"points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg}
-                       for p in pts], "summary": summary,
-            "sheets_unpressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular")},
-            "sheets_pressed": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular", "permeability_press_cfm")},
-            "sheets_pressure": {"circular": cp.sheet_ratios(c, SHEETS, pts, summary, "circular",
+    data = {"points": [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
+                        "sem_mass_kg": p.sem_mass_kg} for p in pts], "summary": summary,
+            "sheets_unpressed": {"circular": cp.sheet_ratios(SHEETS, pts, summary, "circular")},
+            "sheets_pressed": {"circular": cp.sheet_ratios(SHEETS, pts, summary, "circular", "permeability_press_cfm")},
+            "sheets_pressure": {"circular": cp.sheet_ratios(SHEETS, pts, summary, "circular",
                                                             "pressure_permeability_press_cfm")}}
     md = cr.markdown(data, SHEETS)
     t = _table(md, "circular, unpressed")
-    assert t["1"][2:6] == ["620.0 +- 28.3 (n=2)", "2.00", "687.7", "2.22"]
-    assert t["3"][2:6] == ["-", "-", "542.0", "3.10"]  # 700 - 200 x 34.26 / 43.36 = 542.0; / 175
-    assert t["4"][4:6] == ["-", "-"]  # 62.9 ug: beyond case C
+    # S1 is a support point too, at 13.5 x 27.1 / 89.25 = 4.10 ug, below A: not a neighbour of any sheet
+    assert t["1"][2:7] == ["620.0 +- 28.3 (n=2)", "2.00", "687.7", "2.22", "A 10.84, C 54.20"]
+    assert t["3"][2:7] == ["-", "-", "542.0", "3.10", "A 10.84, C 54.20"]  # 700 - 200 x 34.26 / 43.36; / 175
+    assert t["4"][4:7] == ["-", "-", "-"]  # 62.9 ug: beyond case C
     # pressed to pressure: S1 410 +- 14.1 (410 / 310 = 1.32); SEM 500 - 200 x 2.66 / 43.36 = 487.7
     # (/ 310 = 1.57), sheet 3: 500 - 200 x 34.26 / 43.36 = 342.0 (/ 175 = 1.95)
     q = _table(md, "circular, pressed to pressure")
@@ -216,13 +227,20 @@ def test_permeability_figure_plots_the_hand_values() -> None:
         "experiment (Table 4.1)", "circular, unpressed", "circular, pressed to thickness",
         "circular, pressed to pressure", "rectangular, unpressed"}
     assert "pressed to pressure: 410 kPa" in fig.texts[0].get_text()  # the suptitle
-    # SEM, mass: cases A, C at their mapped masses (10.84, 54.2 ug); sheet points not shown
+    # SEM, mass: every point at f x its mass: S1 13.5 x 27.1 / 89.25 = 4.099, S2 27.1 x 27.1 / 89.25
+    # = 8.229, cases A, C at 10.84, 54.2 ug
     x, y, _, yerr = _drawn(_container(axes[2], "circular, unpressed"))
-    assert x.tolist() == pytest.approx([10.84, 54.2], rel=1e-4) and y.tolist() == [700, 500]
-    assert yerr.tolist() == pytest.approx([14, 0])  # type: ignore[union-attr]
+    assert x.tolist() == pytest.approx([4.0992, 8.2288, 10.84, 54.2], rel=1e-4) and y.tolist() == [620, 510, 700, 500]
+    assert yerr.tolist() == pytest.approx([10, 0, 14, 0])  # type: ignore[union-attr]
     x, y, _, yerr = _drawn(_container(axes[2], "circular, pressed to pressure"))
-    assert x.tolist() == pytest.approx([10.84, 54.2], rel=1e-4) and y.tolist() == [680, 300]
-    assert yerr.tolist() == pytest.approx([6, 0])  # type: ignore[union-attr]
+    assert x.tolist() == pytest.approx([4.0992, 10.84, 54.2], rel=1e-4) and y.tolist() == [450, 680, 300]
+    assert yerr.tolist() == pytest.approx([15, 6, 0])  # type: ignore[union-attr]
+    x, y, _, _ = _drawn(_container(axes[2], "rectangular, unpressed"))
+    assert x.tolist() == pytest.approx([4.0992], rel=1e-4) and y.tolist() == [400]
+    # the panel says that the sheet points are SEM support points at f x their mass
+    assert "sheet points S1-S7: SEM support at f x their mass" in axes[2].get_title()
+    assert "f = 0.3036" in axes[2].get_title()
+    assert [t.get_text() for t in axes[2].texts if t.get_color() == "tab:blue"] == ["S1", "S2", "A", "C"]
     # direct, fibers: S1, S2 at their fiber counts (x error bars = sd); the sheets at the same counts
     x, y, xerr, yerr = _drawn(_container(axes[1], "circular, unpressed"))
     assert x.tolist() == [20, 40] and xerr.tolist() == pytest.approx([1, 0]) and yerr.tolist() == pytest.approx([10, 0])  # type: ignore[union-attr]
@@ -257,12 +275,12 @@ def test_thickness_figure_in_um() -> None:
     assert exp.y.tolist() == pytest.approx([0, 10, 82, 93, 97, 141, 149])
     x, y, _, yerr = _drawn(_container(fig.axes[0], "circular, unpressed"))
     assert x.tolist() == pytest.approx([13.5]) and y.tolist() == pytest.approx([250]) and yerr.tolist() == pytest.approx([20])  # type: ignore[union-attr]
-    x, y, _, yerr = _drawn(_container(fig.axes[2], "circular, unpressed"))
-    assert y.tolist() == pytest.approx([244.6, 300]) and yerr.tolist() == pytest.approx([36.8, 0])  # type: ignore[union-attr]
+    x, y, _, yerr = _drawn(_container(fig.axes[2], "circular, unpressed"))  # S1 at 4.10 ug, A, C
+    assert y.tolist() == pytest.approx([250, 244.6, 300]) and yerr.tolist() == pytest.approx([20, 36.8, 0])  # type: ignore[union-attr]
     x, y, _, yerr = _drawn(_container(fig.axes[0], "circular, pressed to pressure"))
     assert y.tolist() == pytest.approx([60]) and yerr.tolist() == pytest.approx([4])  # type: ignore[union-attr]
     x, y, _, yerr = _drawn(_container(fig.axes[2], "circular, pressed to pressure"))
-    assert y.tolist() == pytest.approx([200, 100]) and yerr.tolist() == pytest.approx([10, 0])  # type: ignore[union-attr]
+    assert y.tolist() == pytest.approx([60, 200, 100]) and yerr.tolist() == pytest.approx([4, 10, 0])  # type: ignore[union-attr]
     assert not any(s.section == "rectangular" for s in drawn[("direct", "mass")])
     # what the simulated thickness is: the axis label and the title say it
     assert fig.axes[0].get_ylabel() == "thickness above the fabric top (um)"
@@ -281,7 +299,7 @@ def test_empty_campaign_gives_the_experiments_alone(tmp_path: Path) -> None:
         md = cr.markdown(data, SHEETS)
         for title in ("circular, unpressed", "rectangular, pressed to thickness", "circular, pressed to pressure"):
             t = _table(md, title)
-            assert t["5"] == ["90.0", "58", "-", "-", "-", "-", "97", "-", "-"]
+            assert t["5"] == ["90.0", "58", "-", "-", "-", "-", "-", "97", "-", "-"]
     written = cr.write_report({}, SHEETS, tmp_path / "campaign.json")
     assert [p.name for p in written] == ["campaign-fig412-thickness.png", "campaign-fig413-permeability.png",
                                          "campaign.md"]
@@ -298,3 +316,36 @@ def test_write_report_writes_the_files(tmp_path: Path) -> None:
         assert head == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 10_000
     assert (out.with_suffix(".md")).read_text() == cr.markdown(DATA, SHEETS)
     assert sorted(p.name for p in out.parent.iterdir()) == sorted(p.name for p in written)  # no temporaries left
+
+
+def test_old_results_json_without_sem_masses(tmp_path: Path) -> None:
+    """A results JSON written before ``sem_mass_kg`` and ``sem_factor`` (bench/thesis/results of
+    sessions 9-22): the SEM masses are mass_kg x f with f of the campaign definition the file
+    names; without a readable one the case points alone, at their SEM-mapped
+    ``experimental_mass_kg`` (as before); the figures and tables are made either way."""
+    old = copy.deepcopy(DATA)
+    del old["sem_factor"]
+    # a campaign definition with another mapping (case C = sheet 3): f = 45.1 / (5 x 35.7)
+    camp = tmp_path / "camp"
+    camp.mkdir()
+    (camp / "campaign.yaml").write_text((THESIS / "campaign.yaml").read_text().replace(
+        "sem_mapping: {case: B, sheet: 2}", "sem_mapping: {case: C, sheet: 3}"))
+    shutil.copy(THESIS / "experiments.csv", camp / "experiments.csv")
+    f = 45.1 / (5 * 35.7)
+    (tmp_path / "old").mkdir()
+    old["campaign"] = str(camp / "campaign.yaml")
+    assert cr.sem_factor_of(old) == pytest.approx(f, rel=1e-12)
+    _, drawn = cr.figure(old, SHEETS, "permeability")
+    sem = next(s for s in drawn[("sem", "mass")] if s.label == "circular, unpressed")
+    assert sem.names == ("S1", "S2", "A", "C")
+    assert sem.x.tolist() == pytest.approx([13.5 * f, 27.1 * f, 35.7 * f, 178.5 * f], rel=1e-9)
+    # the file's own sem_factor wins over the campaign definition
+    assert cr.sem_factor_of({**old, "sem_factor": 0.5}) == 0.5
+    # no campaign definition to read: the case points alone, at experimental_mass_kg
+    for gone in ({**old, "campaign": str(tmp_path / "missing.yaml")}, {k: v for k, v in old.items() if k != "campaign"}):
+        assert cr.sem_factor_of(gone) is None
+        _, drawn = cr.figure(gone, SHEETS, "permeability")
+        sem = next(s for s in drawn[("sem", "mass")] if s.label == "circular, unpressed")
+        assert sem.names == ("A", "C") and sem.x.tolist() == pytest.approx([35.7 * F, 178.5 * F], rel=1e-9)
+        written = cr.write_report(gone, SHEETS, tmp_path / "old" / "campaign.json")
+        assert all(p.is_file() for p in written)

@@ -34,11 +34,18 @@ Writes bench/thesis/results/campaign[-reduced].json: the machine, per variant (p
 seed) the collected metrics and stage wall times with the ranks each stage ran on, per point the
 mean and sd over seeds, and per experimental sheet simulated / measured permeability in both mass
 conventions, unpressed, pressed to thickness and pressed to pressure (docs/validation/table41.md).
+Each point row carries its ``sem_mass_kg`` (mass x ``sem_factor``, also in the file): in the SEM
+convention every point, case or sheet, is a support point at that mass; the per-sheet SEM values
+name the points they come from (``support``).
 A variant that failed is listed with its error; a pressure press that waits for its lay-down is
 listed under ``pending``.
 Next to it (fiberform.campaign_report): campaign[-reduced]-fig412-thickness.png and
 campaign[-reduced]-fig413-permeability.png (thesis Figs. 4.12/4.13 redrawn) and campaign[-reduced].md
-(per-sheet tables); --collect-only redraws them from what has finished.
+(per-sheet tables); --collect-only redraws them from what has finished. ``--collect-only --keep``
+keeps the file's groups whose run folders are not here (it replaces only the groups it found a
+sweep of), so it redraws a results file on another machine:
+
+    .venv/bin/python bench/thesis/run.py --collect-only --keep
 """
 
 from __future__ import annotations
@@ -88,15 +95,23 @@ def _read_collect(sweep_dir: Path, fiberform: list[str], build: Path, label: str
     return list(csv.DictReader(table.read_text().splitlines())) if table.is_file() else []
 
 
-def _kept_file(out: Path, current: dict[str, Any] | None) -> dict[str, Any] | None:
+def _kept_file(out: Path, current: dict[str, Any] | None, sem_factor: float) -> dict[str, Any] | None:
     """--keep: the results JSON ``out`` (None if there is none yet); ConfigError (exit 2) if it was
-    written with another pressure_press than the campaign's ``current`` (its rows not comparable)."""
+    written with another pressure_press than the campaign's ``current`` or with another SEM factor
+    than the campaign's ``sem_factor`` (its rows not comparable: a case point's press target is
+    the thickness at its SEM-mapped mass). A file written before the SEM factor was recorded
+    (sessions 9-22) is taken as of the campaign's."""
     if not out.is_file():
         return None
     previous: dict[str, Any] = json.loads(out.read_text())
     if previous.get("pressure_press") != current:
         raise ConfigError(f"--keep: {out} was written with pressure_press {previous.get('pressure_press')}, the "
                           f"campaign now has {current}: its rows are not comparable; run their points again or give "
+                          "another --out")
+    old = previous.get("sem_factor")
+    if old is not None and abs(old - sem_factor) > 1e-9 * sem_factor:
+        raise ConfigError(f"--keep: {out} was written with SEM factor {old:.6g}, the campaign's sem_mapping now "
+                          f"gives {sem_factor:.6g}: its rows are not comparable; run their points again or give "
                           "another --out")
     return previous
 
@@ -137,6 +152,7 @@ def _main() -> int:
     thesis = args.campaign.resolve().parent
     sheets = cp.read_experiments(thesis / "experiments.csv")
     pts = cp.points(c, sheets)
+    f_sem = cp.sem_factor(c, sheets)
     names = args.points or (c.reduced.points if args.reduced else [p.name for p in pts])
     unknown = sorted(set(names) - {p.name for p in pts})
     if unknown:
@@ -157,7 +173,7 @@ def _main() -> int:
     out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
     current = None if c.pressure_press is None else c.pressure_press.model_dump()
     if args.keep:  # checked before anything runs (and read again at the end)
-        _kept_file(out, current)
+        _kept_file(out, current, f_sem)
     fiberform = [sys.executable, "-m", "fiberform"]
     build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
     if args.runs.is_absolute():
@@ -243,12 +259,16 @@ def _main() -> int:
             variants.append({"point": point, "section": section, "ranks": ranks, **r})
     kept_from: dict[str, Any] | None = None
     point_rows = [{"name": p.name, "mass_kg": p.mass_kg, "experimental_mass_kg": p.experimental_mass_kg,
-                   "press_target_m": p.press_target_m} for p in chosen]
+                   "press_target_m": p.press_target_m, "sem_mass_kg": p.sem_mass_kg} for p in chosen]
     # as the file is now: another call may have added to it meanwhile
-    if args.keep and (previous := _kept_file(out, current)) is not None:
-        kept = cp.kept_results(previous, set(groups))
+    if args.keep and (previous := _kept_file(out, current, f_sem)) is not None:
+        # a run replaces the groups it ran; --collect-only only those it found a sweep of here, so
+        # that `--collect-only --keep` on a machine without (some of) the run folders keeps their rows
+        kept = cp.kept_results(previous, set(collected) if args.collect_only else set(groups), f_sem)
         order = {p.name: i for i, p in enumerate(pts)}
-        point_rows = sorted(kept.points + point_rows, key=lambda r: order.get(r["name"], len(order)))
+        mine = {r["name"] for r in point_rows}
+        point_rows = sorted([r for r in kept.points if r["name"] not in mine] + point_rows,
+                            key=lambda r: order.get(r["name"], len(order)))
         variants = kept.variants + variants
         collected = {**kept.collected, **collected}
         failures = {**kept.failures, **failures}
@@ -262,7 +282,7 @@ def _main() -> int:
                       if s in sections or any(g.split("-", 1)[1] == s for g in collected)]
     # per state (unpressed, pressed, pressure) the per-sheet ratios of its permeability metric, under
     # the key the report reads them from
-    ratios = {f"sheets_{state}": {s: cp.sheet_ratios(c, sheets, pts, summary, s, metric)  # type: ignore[arg-type]
+    ratios = {f"sheets_{state}": {s: cp.sheet_ratios(sheets, pts, summary, s, metric)  # type: ignore[arg-type]
                                   for s in table_sections}
               for state, metric in campaign_report.QUANTITIES["permeability"].metric.items()}
     cp.write_json(out, {
@@ -270,6 +290,8 @@ def _main() -> int:
         "command": " ".join(sys.argv[1:]), "machine": machine_info(), "seeds": seeds,
         "points": point_rows, "kept_from": kept_from,
         "pressure_press": current,
+        # SEM convention: experimental mass = simulated mass x sem_factor (every point's sem_mass_kg)
+        "sem_factor": f_sem,
         # --collect-only runs nothing: no wall time of its own (each stage's is in its variant row)
         "collect_only": bool(args.collect_only),
         "wall_s": None if args.collect_only else time.monotonic() - t_start, "failures": failures, "pending": pending, "variants": variants,

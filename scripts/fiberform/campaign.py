@@ -20,15 +20,24 @@ prefix ``pressure_`` (:func:`merge_pressure`).
 
 The two mass conventions:
 
-* direct: an experimental sheet's scaled mass is laid down as it is (no re-matching);
+* direct: an experimental sheet's scaled mass is laid down as it is (no re-matching): sheet k is
+  compared with point Sk;
 * SEM (the thesis' sec. 5.1): simulated case B equals sheet 2, other masses linearly, i.e.
-  experimental scaled mass = simulated mass x (sheet 2's mass / case B's mass).
+  experimental scaled mass = simulated mass x f, f = sheet 2's mass / case B's mass
+  (:func:`sem_factor`, 27.1 / 89.25 = 0.3036). Every simulated point, case or sheet, stands in
+  this convention for the experimental mass f x its own mass (:attr:`Point.sem_mass_kg`: case A
+  10.84 ug, S1 4.10 ug, S2 8.23 ug, S3 13.69 ug), and sheet k's SEM value is the linear
+  interpolation of all points with a finished result at those masses, evaluated at sheet k's
+  scaled mass (:func:`sem_support`, :func:`sem_value`; none outside the points' range). A sheet
+  point thus serves twice: directly for its own sheet, and as an SEM support point at f x its
+  mass (S3 at 13.69 ug, next to sheet 1's 13.5 ug).
 
 ``bench/thesis/run.py`` drives it (``fiberform sweep`` per point and section).
 """
 
 from __future__ import annotations
 
+import bisect
 import csv
 import json
 import math
@@ -48,9 +57,10 @@ if TYPE_CHECKING:
     from .executors import BatchOptions
     from .sweep import Variant
 
-__all__ = ["Campaign", "Kept", "Point", "PressureSweep", "Sheet", "kept_results", "load_campaign", "merge_pressure",
-           "points", "point_scene", "pressure_scene", "read_experiments", "run_pressure_sweep", "sem_interp",
-           "summarise", "sheet_ratios", "use_fiber_contact"]
+__all__ = ["Campaign", "Kept", "Point", "PressureSweep", "SemPoint", "Sheet", "kept_results", "load_campaign",
+           "merge_pressure", "points", "point_scene", "pressure_scene", "read_experiments", "row_sem_mass",
+           "run_pressure_sweep", "sem_factor", "sem_interp", "sem_support", "sem_value", "summarise", "sheet_ratios",
+           "use_fiber_contact"]
 
 Section = Literal["circular", "rectangular"]
 
@@ -134,10 +144,14 @@ class Point:
 
     name: str
     mass_kg: float
-    #: the experimental scaled mass this point stands for (direct: its own; cases: SEM-mapped)
+    #: the experimental scaled mass whose thickness the press targets (sheets: their own, direct;
+    #: cases: SEM-mapped, the same as ``sem_mass_kg``)
     experimental_mass_kg: float
     #: the press target: the experimental thickness at that mass (at least press.min_target_m)
     press_target_m: float
+    #: the experimental scaled mass this simulation stands for in the SEM convention: mass_kg x
+    #: :func:`sem_factor`, for every point (S3, 45.1 ug simulated: 13.69 ug)
+    sem_mass_kg: float
 
 
 def load_campaign(path: Path) -> Campaign:
@@ -176,18 +190,21 @@ def experimental_thickness(sheets: list[Sheet], mass_kg: float) -> float:
 
 
 def points(c: Campaign, sheets: list[Sheet]) -> list[Point]:
-    """The cases (SEM-mapped press targets) then the sheets (their own thickness)."""
+    """The cases (SEM-mapped press targets) then the sheets (their own thickness); every point's
+    SEM mass is its mass x :func:`sem_factor`."""
     f = sem_factor(c, sheets)
     by = {s.sheet: s for s in sheets}
     out = []
     for name, k in c.cases.items():
         m = k * c.M_A_kg
-        out.append(Point(name, m, m * f, max(c.press.min_target_m, experimental_thickness(sheets, m * f))))
+        out.append(Point(name, m, m * f, max(c.press.min_target_m, experimental_thickness(sheets, m * f)),
+                         sem_mass_kg=m * f))
     for n in c.sheets:
         if n not in by:
             raise ConfigError(f"sheets: sheet {n} is not in experiments.csv")
         s = by[n]
-        out.append(Point(f"S{n}", s.scaled_mass_kg, s.scaled_mass_kg, max(c.press.min_target_m, s.thickness_m)))
+        out.append(Point(f"S{n}", s.scaled_mass_kg, s.scaled_mass_kg, max(c.press.min_target_m, s.thickness_m),
+                         sem_mass_kg=s.scaled_mass_kg * f))
     return out
 
 
@@ -382,26 +399,90 @@ def summarise(collected: dict[str, list[dict[str, str]]]) -> dict[str, dict[str,
     return out
 
 
-def sem_interp(cases: list[tuple[float, float]], mass_kg: float) -> float | None:
-    """The SEM convention's value at an experimental scaled mass: ``cases`` (experimental mass,
-    value), sorted by mass, interpolated linearly; None without cases or outside their mass range
-    (ends widened by 1e-6 relative: a case at the sheet's own mass counts, also when it is the
+def sem_interp(support: list[tuple[float, float]], mass_kg: float) -> float | None:
+    """The SEM convention's value at an experimental scaled mass: ``support`` (SEM mass, value),
+    sorted by mass, interpolated linearly; None without support points or outside their mass range
+    (ends widened by 1e-6 relative: a point at the sheet's own mass counts, also when it is the
     only one)."""
-    if not cases or not cases[0][0] * (1 - 1e-6) <= mass_kg <= cases[-1][0] * (1 + 1e-6):
+    if not support or not support[0][0] * (1 - 1e-6) <= mass_kg <= support[-1][0] * (1 + 1e-6):
         return None
-    return float(np.interp(mass_kg, [m for m, _ in cases], [x for _, x in cases]))
+    return float(np.interp(mass_kg, [m for m, _ in support], [x for _, x in support]))
 
 
-def sheet_ratios(c: Campaign, sheets: list[Sheet], pts: list[Point],
+#: points whose SEM masses differ by at most this (relative) are one SEM support point
+SEM_SAME_MASS = 1e-9
+
+
+@dataclass(frozen=True)
+class SemPoint:
+    """One support point of the SEM convention: a simulated point at its SEM mass (mass x
+    :func:`sem_factor`) and its mean over seeds; several points at the same SEM mass are one
+    support point (their names, the mean of their means)."""
+
+    names: tuple[str, ...]
+    sem_mass_kg: float
+    mean: float
+
+    def row(self) -> dict[str, Any]:
+        """As the results JSON records it: ``{"point": "A", "sem_mass_kg": ..., "mean": ...}``
+        (merged points: names joined by ``+``)."""
+        return {"point": "+".join(self.names), "sem_mass_kg": self.sem_mass_kg, "mean": self.mean}
+
+
+def sem_support(named: list[tuple[str, float]], summary: dict[str, dict[str, dict[str, float]]],
+                section: str, metric: str) -> list[SemPoint]:
+    """The support points of ``metric`` in ``section`` in the SEM convention: every point of
+    ``named`` (name, SEM mass), case or sheet, whose group (``S3-circular``) has a mean of
+    ``metric`` in ``summary``, sorted by SEM mass. Points whose SEM masses lie within
+    :data:`SEM_SAME_MASS` (relative) of the lightest of them are merged into one support point at
+    their mean SEM mass, with the mean of their means and their names in sorted order, so the
+    result does not depend on the order of ``named``."""
+    found = sorted((m, name, summary[g][metric]["mean"]) for name, m in named
+                   if metric in summary.get(g := f"{name}-{section}", {}))
+    clusters: list[list[tuple[float, str, float]]] = []
+    for item in found:
+        if clusters and item[0] - clusters[-1][0][0] <= SEM_SAME_MASS * abs(clusters[-1][0][0]):
+            clusters[-1].append(item)
+        else:
+            clusters.append([item])
+    return [SemPoint(tuple(sorted(n for _, n, _ in cl)), statistics.fmean(m for m, _, _ in cl),
+                     statistics.fmean(v for _, _, v in cl)) for cl in clusters]
+
+
+def sem_value(support: list[SemPoint], mass_kg: float) -> tuple[float, list[SemPoint]] | None:
+    """The SEM value at an experimental scaled mass (:func:`sem_interp` over ``support``, sorted
+    as :func:`sem_support` returns it) and the support points it comes from: the two neighbours
+    around the mass, or one point (at the mass itself within :data:`SEM_SAME_MASS`, or at an end
+    of the range within its 1e-6 widening). None outside the support points' range."""
+    masses = [p.sem_mass_kg for p in support]
+    v = sem_interp([(p.sem_mass_kg, p.mean) for p in support], mass_kg)
+    if v is None:
+        return None
+    i = bisect.bisect_left(masses, mass_kg)
+    at = sorted((abs(masses[j] - mass_kg), j) for j in (i - 1, i)
+                if 0 <= j < len(masses) and abs(masses[j] - mass_kg) <= SEM_SAME_MASS * abs(mass_kg))
+    if at:
+        used = [at[0][1]]
+    elif i == 0:
+        used = [0]
+    elif i == len(masses):
+        used = [i - 1]
+    else:
+        used = [i - 1, i]
+    return v, [support[j] for j in used]
+
+
+def sheet_ratios(sheets: list[Sheet], pts: list[Point],
                  summary: dict[str, dict[str, dict[str, float]]], section: Section,
                  metric: str = "permeability_cfm") -> list[dict[str, Any]]:
     """Per experimental sheet: the simulated ``metric`` (mean, sd) and simulated / measured
-    permeability in both conventions. direct: the sheet's own point; SEM: the case points'
-    means interpolated linearly in experimental mass (None outside the cases' range or where no
-    case has finished)."""
-    by_point = {p.name: p for p in pts}
-    cases = sorted((by_point[n].experimental_mass_kg, summary[f"{n}-{section}"][metric]["mean"])
-                   for n in c.cases if metric in summary.get(f"{n}-{section}", {}))
+    permeability in both conventions. direct: the sheet's own point; SEM: the means of all points
+    of ``pts`` (cases and sheet points) at their SEM masses (:attr:`Point.sem_mass_kg`)
+    interpolated linearly at the sheet's scaled mass (:func:`sem_support`, :func:`sem_value`;
+    None outside the range of the points that have finished ``metric``), with ``support``: the
+    points it comes from (``[{"point", "sem_mass_kg", "mean"}]``, the two neighbours or one point
+    at the sheet's mass)."""
+    support = sem_support([(p.name, p.sem_mass_kg) for p in pts], summary, section, metric)
     out = []
     for s in sheets:
         row: dict[str, Any] = {"sheet": s.sheet, "measured_cfm": s.permeability_cfm,
@@ -409,10 +490,22 @@ def sheet_ratios(c: Campaign, sheets: list[Sheet], pts: list[Point],
         d = summary.get(f"S{s.sheet}-{section}", {}).get(metric)
         row["direct"] = None if d is None else {"mean": d["mean"], "sd": d["sd"], "n": d["n"],
                                                 "ratio": d["mean"] / s.permeability_cfm}
-        v = sem_interp(cases, s.scaled_mass_kg)
-        row["sem"] = None if v is None else {"mean": v, "ratio": v / s.permeability_cfm}
+        sem = sem_value(support, s.scaled_mass_kg)
+        row["sem"] = None if sem is None else {"mean": sem[0], "ratio": sem[0] / s.permeability_cfm,
+                                               "support": [p.row() for p in sem[1]]}
         out.append(row)
     return out
+
+
+def row_sem_mass(row: dict[str, Any], sem_factor: float | None) -> float | None:
+    """The SEM mass of a results JSON's point row: its ``sem_mass_kg``, or for a row written before
+    that field (bench/thesis/results/campaign.json of sessions 9-22) ``mass_kg`` x ``sem_factor``;
+    None if neither can be had."""
+    if "sem_mass_kg" in row:
+        return float(row["sem_mass_kg"])
+    if sem_factor is None or "mass_kg" not in row:
+        return None
+    return float(row["mass_kg"]) * sem_factor
 
 
 #: the keys a results JSON's variant row has beside its collect.csv columns
@@ -423,18 +516,22 @@ _VARIANT_KEYS = ("point", "section", "ranks")
 class Kept:
     """What an earlier results JSON contributes to a new one (:func:`kept_results`)."""
 
-    points: list[dict[str, Any]]  #: its ``points`` entries of the kept groups' points
+    #: its ``points`` entries of the kept groups' points (``sem_mass_kg`` added where missing)
+    points: list[dict[str, Any]]
     collected: dict[str, list[dict[str, str]]]  #: group -> its collect rows, as :func:`summarise` takes them
     variants: list[dict[str, Any]]  #: its variant rows of the kept groups, unchanged
     failures: dict[str, str]  #: its failures of the kept groups (``A-circular``, ``A-circular-pressure``)
     pending: dict[str, dict[str, str]]  #: its pending pressure presses of the kept groups
 
 
-def kept_results(previous: dict[str, Any], replaced: set[str]) -> Kept:
+def kept_results(previous: dict[str, Any], replaced: set[str], sem_factor: float | None = None) -> Kept:
     """The groups (``"A-circular"``) of an earlier results JSON that this invocation does not run
     (not in ``replaced``), so that ``bench/thesis/run.py --keep`` can add points to a results file
     whose other points' run folders are gone (a new machine): their variant rows are taken over
-    unchanged and enter the summary and the per-sheet ratios as if collected again."""
+    unchanged and enter the summary and the per-sheet ratios as if collected again. A point row
+    written before ``sem_mass_kg`` existed gets it as ``mass_kg`` x f (:func:`row_sem_mass`), f
+    the file's ``sem_factor`` or, in a file without one, ``sem_factor`` (the campaign's)."""
+    f = previous.get("sem_factor", sem_factor)
     variants = [v for v in previous.get("variants", [])
                 if f"{v['point']}-{v['section']}" not in replaced]
     collected: dict[str, list[dict[str, str]]] = {}
@@ -446,7 +543,12 @@ def kept_results(previous: dict[str, Any], replaced: set[str]) -> Kept:
     def kept(key: str) -> bool:
         return key.removesuffix("-pressure") in collected
 
-    return Kept(points=[p for p in previous.get("points", []) if p["name"] in names], collected=collected,
+    rows = []
+    for p in previous.get("points", []):
+        if p["name"] in names:
+            m = row_sem_mass(p, f)
+            rows.append(p if m is None or "sem_mass_kg" in p else {**p, "sem_mass_kg": m})
+    return Kept(points=rows, collected=collected,
                 variants=variants, failures={k: v for k, v in previous.get("failures", {}).items() if kept(k)},
                 pending={k: v for k, v in previous.get("pending", {}).items() if kept(k)})
 

@@ -10,12 +10,15 @@ dict and the experiments (``campaign.read_experiments``) into
   fibers, the experiments (Table 4.1) against the simulation (circular and rectangular sections;
   unpressed, pressed to the experimental thickness and pressed to the campaign's stated pressure;
   error bars = sd over seeds), in both mass conventions: direct (points
-  S1..S7 at the sheets' own scaled masses) and SEM (case points A..G at their SEM-mapped masses).
-  On the fiber axis an experimental sheet sits at the fiber count of its simulated counterpart in
-  that convention and section (direct: point Sk; SEM: the case points interpolated at its mass);
+  S1..S7 at the sheets' own scaled masses) and SEM (every point, the cases A..G and the sheet
+  points S1..S7, at its SEM mass f x its simulated mass: the support points of the SEM values,
+  the line through them the interpolation; ``sem_mass_kg`` of the JSON's points, or for a file
+  written before that field mass_kg x f, :func:`sem_factor_of`). On the fiber axis an
+  experimental sheet sits at the fiber count of its simulated counterpart in that convention and
+  section (direct: point Sk; SEM: the points' counts interpolated at its mass);
 * a Markdown table per section and state (unpressed, pressed to thickness, pressed to pressure):
-  per sheet the measured and the simulated permeability and their ratio in both conventions, and
-  the thicknesses.
+  per sheet the measured and the simulated permeability and their ratio in both conventions, the
+  points the SEM value comes from, and the thicknesses.
 
 States (:data:`STATES`, their labels :data:`STATE_LABELS`): ``unpressed`` (the lay-down's sheet),
 ``pressed`` (the campaign's velocity-controlled press to the experimental thickness; JSON
@@ -37,6 +40,7 @@ the experiments alone.
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,13 +48,15 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from .campaign import Sheet, sem_interp
+from .campaign import Sheet, load_campaign, read_experiments, row_sem_mass, sem_factor, sem_support, sem_value
+from .errors import ConfigError
 from .provenance import atomic_write_text, in_progress_path
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["QUANTITIES", "STATES", "STATE_LABELS", "Series", "figure", "figure_series", "markdown", "write_figure", "write_report"]
+__all__ = ["QUANTITIES", "STATES", "STATE_LABELS", "Series", "figure", "figure_series", "markdown", "sem_factor_of",
+           "write_figure", "write_report"]
 
 Convention = Literal["direct", "sem"]
 Axis = Literal["mass", "fibers"]
@@ -114,22 +120,61 @@ def _is_sheet_point(name: str) -> bool:
     return name.startswith("S") and name[1:].isdigit()  # campaign.points: sheets S1.., cases one letter
 
 
-def _points(data: dict[str, Any], convention: Convention) -> list[dict[str, Any]]:
-    """The JSON's points of a convention: direct the sheet points, SEM the case points."""
-    return [p for p in data.get("points", []) if _is_sheet_point(p["name"]) == (convention == "direct")]
+@functools.lru_cache(maxsize=8)
+def _campaign_sem_factor(path: str) -> float | None:
+    """f of the campaign definition ``path`` (experiments.csv beside it); None if unreadable."""
+    try:
+        return sem_factor(load_campaign(Path(path)), read_experiments(Path(path).parent / "experiments.csv"))
+    except (ConfigError, OSError, ValueError, KeyError):
+        return None
+
+
+def sem_factor_of(data: dict[str, Any]) -> float | None:
+    """The SEM factor f (experimental mass per simulated mass) of a results JSON: its
+    ``sem_factor``; for a file written before that field, f of the campaign definition it names
+    (``campaign``, with ``experiments.csv`` beside it); None if neither can be read."""
+    if data.get("sem_factor") is not None:
+        return float(data["sem_factor"])
+    return _campaign_sem_factor(str(data["campaign"])) if data.get("campaign") else None
+
+
+def _mass(p: dict[str, Any], convention: Convention, f: float | None) -> float | None:
+    """The experimental mass a JSON point row stands for in a convention: direct its own
+    ``experimental_mass_kg``, SEM its ``sem_mass_kg`` (or mass_kg x f: campaign.row_sem_mass; a
+    case point of an old file without any f: its SEM-mapped ``experimental_mass_kg``)."""
+    if convention == "direct":
+        return float(p["experimental_mass_kg"])
+    m = row_sem_mass(p, f)
+    if m is None and not _is_sheet_point(p["name"]) and "experimental_mass_kg" in p:
+        return float(p["experimental_mass_kg"])
+    return m
+
+
+def _points(data: dict[str, Any], convention: Convention) -> list[tuple[dict[str, Any], float]]:
+    """The JSON's points of a convention with the experimental mass each stands for: direct the
+    sheet points at their own masses, SEM every point (cases and sheet points) at its SEM mass
+    (points whose SEM mass cannot be had are left out)."""
+    f = sem_factor_of(data) if convention == "sem" else None
+    out: list[tuple[dict[str, Any], float]] = []
+    for p in data.get("points", []):
+        if convention == "direct" and not _is_sheet_point(p["name"]):
+            continue
+        if (m := _mass(p, convention, f)) is not None:
+            out.append((p, m))
+    return out
 
 
 def _counterpart(data: dict[str, Any], sheet: Sheet, section: str, metric: str,
                  convention: Convention) -> float | None:
-    """The simulated mean of ``metric`` that stands for ``sheet``: direct its own point, SEM the
-    case points interpolated at its mass (campaign.sem_interp)."""
+    """The simulated mean of ``metric`` that stands for ``sheet``: direct its own point, SEM every
+    point at its SEM mass interpolated at the sheet's mass (campaign.sem_support, sem_value)."""
     summary: Summary = data.get("summary", {})
     if convention == "direct":
         st = summary.get(_group(f"S{sheet.sheet}", section), {}).get(metric)
         return None if st is None else st["mean"]
-    cases = sorted((p["experimental_mass_kg"], summary[g][metric]["mean"]) for p in _points(data, "sem")
-                   if metric in summary.get(g := _group(p["name"], section), {}))
-    return sem_interp(cases, sheet.scaled_mass_kg)
+    support = sem_support([(p["name"], m) for p, m in _points(data, "sem")], summary, section, metric)
+    v = sem_value(support, sheet.scaled_mass_kg)
+    return None if v is None else v[0]
 
 
 def _series(label: str, rows: list[Row], section: str | None,
@@ -159,12 +204,12 @@ def figure_series(data: dict[str, Any], sheets: list[Sheet], quantity: str, conv
     for section in SECTIONS:
         for state in STATES:
             rows: list[Row] = []
-            for p in _points(data, convention):
+            for p, mass in _points(data, convention):
                 st = summary.get(_group(p["name"], section), {})
                 if (v := st.get(q.metric[state])) is None:
                     continue
                 if axis == "mass":
-                    x, xsd = p["experimental_mass_kg"] * 1e9, 0.0
+                    x, xsd = mass * 1e9, 0.0
                 elif "fibers" in st:
                     x, xsd = st["fibers"]["mean"], st["fibers"]["sd"]
                 else:
@@ -177,9 +222,15 @@ def figure_series(data: dict[str, Any], sheets: list[Sheet], quantity: str, conv
 _COLOURS: dict[str | None, str] = {"circular": "tab:blue", "rectangular": "tab:orange", None: "black"}
 _MARKERS: dict[State, str] = {"unpressed": "o", "pressed": "v", "pressure": "D"}
 _LINES: dict[State, str] = {"unpressed": "-", "pressed": "--", "pressure": "-."}
-_TITLES = {"direct": "direct: sheets' scaled masses (points S1-S7)",
-           "sem": "SEM mapping: cases A-G at their mapped masses"}
 _XLABELS = {"mass": "injection mass on 3 x 3 mm (ug)", "fibers": "number of fibers (generated)"}
+
+
+def _title(convention: Convention, f: float | None) -> str:
+    """The panel title; SEM says that every point, the sheet points too, is a support point."""
+    if convention == "direct":
+        return "direct: sheets' scaled masses (points S1-S7)"
+    return (f"SEM (case B = sheet 2): each point at f x its mass{'' if f is None else f', f = {f:.4f}'}"
+            "\n(sheet points S1-S7: SEM support at f x their mass)")
 
 
 def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Figure, dict[tuple[str, str], list[Series]]]:
@@ -190,6 +241,7 @@ def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Fi
 
     q = QUANTITIES[quantity]
     fig = matplotlib.figure.Figure(figsize=(11.0, 8.0))
+    f = sem_factor_of(data)
     axes = fig.subplots(len(CONVENTIONS), len(AXES), squeeze=False)
     drawn: dict[tuple[str, str], list[Series]] = {}
     for i, conv in enumerate(CONVENTIONS):
@@ -203,11 +255,15 @@ def figure(data: dict[str, Any], sheets: list[Sheet], quantity: str) -> tuple[Fi
                             mfc="none" if experiment and s.section else None,
                             ls=":" if experiment and s.section else ("-" if s.state is None else _LINES[s.state]),
                             capsize=3, lw=1.2)
+                if conv == "sem" and axis == "mass" and s.state == "unpressed":
+                    for name, x, y in zip(s.names, s.x, s.y, strict=True):  # which point supports where
+                        ax.annotate(name, (x, y), xytext=(3, 3), textcoords="offset points", fontsize=6,
+                                    color=_COLOURS[s.section])
             if not panel:
                 ax.text(0.5, 0.5, "no simulated points yet", transform=ax.transAxes, ha="center", color="grey")
             ax.set_xlabel(_XLABELS[axis])
             ax.set_ylabel(q.label)
-            ax.set_title(_TITLES[conv], fontsize=9)
+            ax.set_title(_title(conv, f), fontsize=9)
             ax.grid(alpha=0.3)
             if panel:
                 ax.legend(fontsize=7)
@@ -251,11 +307,24 @@ def _stat(st: dict[str, float] | None, scale: float = 1.0) -> str:
     return f"{st['mean'] * scale:.1f} +- {st['sd'] * scale:.1f} (n={int(st['n'])})"
 
 
+def _f_text(data: dict[str, Any]) -> str:
+    f = sem_factor_of(data)
+    return "f = sheet 2's mass / case B's mass" if f is None else f"f = {f:.4f}"
+
+
+def _support(sem: dict[str, Any] | None) -> str:
+    """The SEM value's support points (campaign.sheet_ratios): ``A 10.84, S3 13.69``; ``-``
+    without a value or in a file that does not record them."""
+    if not sem or not sem.get("support"):
+        return "-"
+    return ", ".join(f"{p['point']} {p['sem_mass_kg'] * 1e9:.2f}" for p in sem["support"])
+
+
 def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
     """Per section and state one table: per sheet the measured permeability, the simulated one and
     simulated / measured in the direct and the SEM convention (the JSON's ``sheets_unpressed`` /
-    ``sheets_pressed`` / ``sheets_pressure``), the measured and simulated thickness; ``-`` where not
-    available."""
+    ``sheets_pressed`` / ``sheets_pressure``), the points the SEM value comes from, the measured
+    and simulated thickness; ``-`` where not available."""
     summary: Summary = data.get("summary", {})
     sections = list(data.get("sheets_unpressed") or SECTIONS)
     pp = data.get("pressure_press") or {}
@@ -264,7 +333,10 @@ def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
              f"From `bench/thesis/run.py {data.get('command', '')}` (seeds: {data.get('seeds', '-')}). Permeability in CFM "
              "(cubic feet per square foot per minute) at 125 Pa, thickness in um, masses in ug on 3 x 3 mm. "
              "Simulated values: mean +- sd over seeds (n seeds). direct: sheet k against point Sk (its own "
-             "scaled mass); SEM: the case points interpolated linearly at the sheet's mass (case B = sheet 2). "
+             "scaled mass); SEM (case B = sheet 2): every simulated point, case or sheet, stands for f x its "
+             f"simulated mass ({_f_text(data)}), and the finished points' values are interpolated linearly at "
+             "the sheet's mass, only within their range; 'SEM: from' names the points (at their SEM masses, "
+             "ug) the SEM permeability comes from. "
              "Ratio: simulated / measured permeability. Simulated thickness: thickness above the fabric top, "
              "95th percentile of the fibers' upper surfaces minus the fabric top, at least 0 (pressed: at the "
              "end of the press; the 5-95 % span of node heights + one width, which counts fibers hanging into "
@@ -283,15 +355,16 @@ def markdown(data: dict[str, Any], sheets: list[Sheet]) -> str:
             thick = QUANTITIES["thickness"].metric[state]
             lines += [f"## {section}, {STATE_LABELS[state]}", "",
                       "| sheet | mass (ug) | measured (CFM) | direct: simulated (CFM) | direct: ratio | "
-                      "SEM: simulated (CFM) | SEM: ratio | measured thickness (um) | direct: thickness above "
-                      "fabric (um) | SEM: thickness above fabric (um) |", "|" + "---|" * 10]
+                      "SEM: simulated (CFM) | SEM: ratio | SEM: from (point at SEM mass, ug) | measured thickness "
+                      "(um) | direct: thickness above fabric (um) | SEM: thickness above fabric (um) |",
+                      "|" + "---|" * 11]
             for s in sheets:
                 r = rows.get(s.sheet, {})
                 d, sem = r.get("direct"), r.get("sem")
                 sem_t = _counterpart(data, s, section, thick, "sem")
                 cells = [str(s.sheet), f"{s.scaled_mass_kg * 1e9:.1f}", f"{s.permeability_cfm:g}", _stat(d),
                          _num(d and d["ratio"], 2), _num(sem and sem["mean"], 1), _num(sem and sem["ratio"], 2),
-                         f"{s.thickness_m * 1e6:g}",
+                         _support(sem), f"{s.thickness_m * 1e6:g}",
                          _stat(summary.get(_group(f"S{s.sheet}", section), {}).get(thick), 1e6),
                          _num(None if sem_t is None else sem_t * 1e6, 1)]
                 lines.append("| " + " | ".join(cells) + " |")
