@@ -20,6 +20,7 @@ import yaml
 
 from bench_scripts import load_bench_script
 from laydown_scenes import tiny_laydown_scene
+from fiberform._versions import build_revision
 from fiberform.provenance import append_result_rows
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -126,14 +127,6 @@ def test_probe_ends_with_the_final_state_dump(probe: Any, run: Path) -> None:
                     '"%d %.17g %.17g %.17g %.17g %.17g %.17g"'), last
 
 
-def test_build_revision_is_read_only_when_recorded(probe: Any, tmp_path: Path) -> None:
-    assert probe.build_revision(tmp_path) is None
-    (tmp_path / "REVISION").write_text("69802b8\n")
-    assert probe.build_revision(tmp_path) == "69802b8"
-    (tmp_path / "REVISION").write_text("not a commit; rm -rf /\n")
-    assert probe.build_revision(tmp_path) is None
-
-
 def test_combinations_alternate_within_each_repetition(probe: Any) -> None:
     """A1 B1 A2 B2, then again: ranks outer, builds inner, repetitions outermost."""
     assert probe.combinations([Path("A"), Path("B")], [1, 2], 2) == [
@@ -226,7 +219,7 @@ def test_two_builds_one_and_two_ranks_end_in_the_same_state(laydown_run: Path, f
         assert 0.0 < r["throughput_cores_before"] <= 2.5 and 0.0 < r["throughput_cores_after"] <= 2.5, r
         assert r["folder"].endswith(f"-b{r['build_index']}-np{r['ranks']}"), r
     assert rows[1]["build_revision"] == "69802b8-dirty"
-    assert ("build_revision" in rows[0]) == (fiberdem_build / "REVISION").is_file()
+    assert rows[0]["build_revision"] == build_revision(fiberdem_build)
     assert len({r["fiberdem"] for r in rows}) == 1
     states = {r["final_state"] for r in rows}
     assert len(states) == 1 and states.pop().startswith("sha256:"), rows

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import fiberform
-from fiberform._versions import git_revision
+from fiberform._versions import build_revision, git_revision
 
 
 def _cli(cmd: list[str], *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
@@ -74,6 +74,49 @@ def test_git_revision_outside_git_and_dirty(tmp_path: Path) -> None:
     assert clean != "unknown" and not clean.endswith("-dirty")
     (tmp_path / "f").write_text("b\n")
     assert git_revision(tmp_path) == clean + "-dirty"
+
+
+def test_build_revision_reads_the_build_folders_file(tmp_path: Path) -> None:
+    assert build_revision(tmp_path) == "unknown"  # no REVISION file
+    (tmp_path / "REVISION").write_text("69802b8\n")
+    assert build_revision(tmp_path) == "69802b8"
+    (tmp_path / "REVISION").write_text("69802b8-dirty\nmore\n")
+    assert build_revision(tmp_path) == "69802b8-dirty"
+    for junk in ("not a commit; rm -rf /\n", "", "69802B8\n", "69802b8-clean\n"):
+        (tmp_path / "REVISION").write_text(junk)
+        assert build_revision(tmp_path) == "unknown", junk
+
+
+def test_write_revision_cmake_script(tmp_path: Path) -> None:
+    """cmake/WriteRevision.cmake (run at every build): REVISION holds the short commit, -dirty only
+    when a tracked file under the compiled trees changed (not for docs), unknown outside git; it
+    is not rewritten when its text stays the same."""
+    script = Path(__file__).resolve().parents[1] / "cmake" / "WriteRevision.cmake"
+    src, out = tmp_path / "src", tmp_path / "build" / "REVISION"
+    out.parent.mkdir()
+    src.mkdir()
+
+    def write() -> str:
+        subprocess.run(["cmake", f"-DSRC={src}", f"-DOUT={out}", "-P", str(script)], check=True)
+        return out.read_text()
+
+    assert write() == "unknown\n"
+    git = ["git", "-C", str(src), "-c", "user.name=t", "-c", "user.email=t@example.invalid"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    for rel in ("liggghts-fiber-style/a.cpp", "docs/a.md"):
+        (src / rel).parent.mkdir(parents=True)
+        (src / rel).write_text("a\n")
+        subprocess.run([*git, "add", rel], check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
+    head = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                          check=True).stdout.strip()
+    assert write() == f"{head}\n"
+    stamp = out.stat().st_mtime_ns
+    (src / "docs/a.md").write_text("b\n")  # not compiled: still clean, and not rewritten
+    assert write() == f"{head}\n" and out.stat().st_mtime_ns == stamp
+    (src / "liggghts-fiber-style/a.cpp").write_text("b\n")
+    assert write() == f"{head}-dirty\n"
+    assert build_revision(out.parent) == f"{head}-dirty"
 
 
 def test_unknown_command_is_usage_error(fiberform_cmd: list[str]) -> None:

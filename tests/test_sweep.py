@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 import pytest
 
+from fiberform._versions import build_dir, build_revision
 from fiberform.provenance import read_provenance
 
 from test_generate import SCENE as GENERATE_SCENE  # noqa: E402 - the generate tests' scene
@@ -47,8 +48,10 @@ def test_two_values_by_two_seeds(tmp_path: Path) -> None:
         target = float(row["fibers.target_mass_kg"])
         assert target <= float(row["fiber_mass_kg"]) < target + heaviest, row
         assert float(row["generate_wall_s"]) > 0
-        assert row["generate_git_revision"] == read_provenance(
-            tmp_path / v["output_dir"] / "fibers" / "fibers.h5")["git_revision"] != ""
+        prov = read_provenance(tmp_path / v["output_dir"] / "fibers" / "fibers.h5")
+        assert row["generate_git_revision"] == prov["git_revision"] != ""
+        # the build folder's REVISION (cmake/WriteRevision.cmake), "unknown" without one
+        assert row["generate_build_revision"] == prov["build_revision"] == build_revision(build_dir())
     # the seeds give different fiber sets; a second sweep finds every variant up to date
     assert rows[0]["fiber_mass_kg"] != rows[1]["fiber_mass_kg"]
     again = _ff(tmp_path, "sweep", "s.yaml", "--set", "fibers.target_mass_kg=1.0e-9,2.5e-9", "--seeds", "2")

@@ -41,9 +41,9 @@ fibers starting to pile up), made by
 Every probe ends with a dump of the final state (``final.dump``: every node's id, x, y, z, vx, vy,
 vz with ``%.17g``, sorted by id) and reports its sha256 (``final_state``), the CPU time of the
 whole run (``cpu_s``: user + sys of fiberdem, or of mpirun and all its ranks, from os.wait4) and the
-build (``build``, ``fiberdem``: the sha256 of its bin/fiberdem, ``build_revision``: the first line
-of ``BUILD/REVISION`` when the build folder has one, e.g. written by
-``git rev-parse --short HEAD > BUILD/REVISION`` when a build is frozen).
+build (``build``, ``fiberdem``: the sha256 of its bin/fiberdem, ``build_revision``: the commit its
+binaries come from, the build folder's ``REVISION`` file that every build writes,
+cmake/WriteRevision.cmake; ``unknown`` for a build folder made before that file existed).
 
 Builds and ranks: ``--builds DIR [DIR ...]`` (default ``$FIBERFORM_BUILD`` or ``build``) and
 ``--ranks R [R ...]`` (default 1; ``mpirun -np R`` when R > 1) run every (build, ranks)
@@ -80,6 +80,7 @@ from typing import Any
 
 import yaml
 
+from fiberform._versions import build_revision
 from fiberform.fiber_io import NODES_NAME
 from fiberform.inputs import LiggghtsInput, dump_format, file_token, fix_ref
 from fiberform.liggghts_log import thermo_rows
@@ -99,7 +100,6 @@ COLUMNS = ("iterations", "max_iterations", "tangents", "mean_iterations", "mean_
 FINAL_DUMP = "final.dump"
 FINAL_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz")
 CONCURRENCY = ROOT / "bench" / "machine" / "run_concurrency.py"
-REVISION = re.compile(r"[0-9a-f]{7,40}(-dirty)?")
 MAX_REPEAT = 100
 
 
@@ -148,16 +148,6 @@ def final_state_dump() -> str:
     s.command("write_dump", "all", "custom", file_token(FINAL_DUMP), *FINAL_COLUMNS,
               "modify", "sort", "id", "format", dump_format(["int"] + ["float"] * (len(FINAL_COLUMNS) - 1)))
     return s.render()
-
-
-def build_revision(build: Path) -> str | None:
-    """The commit a build folder records in its REVISION file (first line, a hex commit,
-    optionally ``-dirty``), else None."""
-    try:
-        first = (build / "REVISION").read_text().splitlines()[0].strip()
-    except (OSError, IndexError, UnicodeDecodeError):
-        return None
-    return first if REVISION.fullmatch(first) else None
 
 
 def run_counted(argv: list[str], cwd: Path, stderr: Path) -> tuple[int, float, float]:
@@ -237,9 +227,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
                            "exit": code,
                            "wall_s": wall, "folder": str(folder), "build": str(build),
                            "fiberdem": file_hash(fiberdem)}
-    revision = build_revision(build)
-    if revision is not None:
-        row["build_revision"] = revision
+    row["build_revision"] = build_revision(build)
     row.update({"ranks": ranks, "cpu_s": user + system, "cpu_user_s": user, "cpu_sys_s": system})
     final = folder / FINAL_DUMP
     if final.is_file():

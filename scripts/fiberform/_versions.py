@@ -15,6 +15,7 @@ from .runner import capture
 __all__ = [
     "ComponentVersion",
     "build_dir",
+    "build_revision",
     "component_versions",
     "fiberform_version",
     "git_revision",
@@ -60,6 +61,23 @@ def git_revision(root: Path | None = None) -> str:
     status = capture(["git", "-C", str(where), "status", "--porcelain", "--untracked-files=no"])
     dirty = status is None or bool(status.strip())
     return rev.strip() + ("-dirty" if dirty else "")
+
+
+#: what build/REVISION may hold (cmake/WriteRevision.cmake): a short commit, maybe ``-dirty``
+_BUILD_REVISION = re.compile(r"[0-9a-f]{7,40}(-dirty)?")
+
+
+def build_revision(build: Path) -> str:
+    """The commit a build folder's binaries were compiled from: the first line of its
+    ``REVISION`` file, written at every build by cmake/WriteRevision.cmake (a short commit,
+    ``-dirty`` when the compiled trees had changes); ``unknown`` without that file or with other
+    text. It can differ from :func:`git_revision` (the Python code's): a frozen build folder keeps
+    running the binaries of its commit."""
+    try:
+        first = (build / "REVISION").read_text().splitlines()[0].strip()
+    except (OSError, IndexError, UnicodeDecodeError):
+        return "unknown"
+    return first if _BUILD_REVISION.fullmatch(first) else "unknown"
 
 
 def fiberform_version() -> str:

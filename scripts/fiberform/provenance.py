@@ -9,6 +9,8 @@ attribute          meaning
 ``stage``          stage name (``demo-particles``)
 ``fiberform``      package version, e.g. ``0.1.0``
 ``git_revision``   short commit, ``-dirty`` if modified, ``unknown`` outside git
+``build_revision`` the commit the build folder's binaries come from (its ``REVISION`` file:
+                   :func:`fiberform._versions.build_revision`), ``unknown`` without one
 ``scene_json``     the validated scene, defaults filled in, as canonical JSON
 ``seed``           the scene's seed
 ``input_hashes``   JSON object: input name -> ``sha256:<hex>``
@@ -36,7 +38,7 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
-from ._versions import git_revision, package_version
+from ._versions import build_revision, git_revision, package_version
 from .scene import Scene
 
 __all__ = [
@@ -120,11 +122,14 @@ def write_provenance(
     scene: Scene,
     input_hashes: Mapping[str, str],
     options: Mapping[str, Any] | None = None,
+    build: Path | None = None,
 ) -> None:
-    """Write the provenance attributes (see the module docstring) on the root group."""
+    """Write the provenance attributes (see the module docstring) on the root group; ``build``:
+    the build folder whose binaries the stage ran (``build_revision``; ``unknown`` when None)."""
     f.attrs["stage"] = stage
     f.attrs["fiberform"] = package_version()
     f.attrs["git_revision"] = git_revision()
+    f.attrs["build_revision"] = build_revision(build) if build is not None else "unknown"
     f.attrs["scene_json"] = scene.to_json()
     f.attrs["seed"] = np.int64(scene.seed)
     f.attrs["input_hashes"] = json.dumps(dict(input_hashes), sort_keys=True)

@@ -338,9 +338,10 @@ def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
             if "elapsed_s" in prov:
                 row[f"{st.name}_wall_s"] = float(prov["elapsed_s"])
                 columns.append(f"{st.name}_wall_s")
-            if "git_revision" in prov:  # the code that made the product (rows of other versions can mix)
-                row[f"{st.name}_git_revision"] = str(prov["git_revision"])
-                columns.append(f"{st.name}_git_revision")
+            for rev in ("git_revision", "build_revision"):  # the code (Python, binaries) that made it
+                if rev in prov:  # (rows of other versions can mix)
+                    row[f"{st.name}_{rev}"] = str(prov[rev])
+                    columns.append(f"{st.name}_{rev}")
         rows.append(row)
     header = ["variant", "seed", *paths, *dict.fromkeys(c for c in columns if c not in paths)]
     buf = io.StringIO()
@@ -349,7 +350,7 @@ def collect(sweep_dir: Path, build_dir: Path) -> tuple[Path, Path, int]:
     w.writerows(rows)
     out_csv, out_png = root / COLLECT_CSV, root / COLLECT_PNG
     atomic_write_text(out_csv, buf.getvalue())
-    _plot(rows, paths, [c for c in header[2 + len(paths):] if not c.endswith(("_wall_s", "_git_revision"))],
+    _plot(rows, paths, [c for c in header[2 + len(paths):] if not c.endswith(("_wall_s", "_git_revision", "_build_revision"))],
           out_png)
     return out_csv, out_png, len(rows)
 

@@ -321,7 +321,7 @@ class Stage(abc.ABC):
             for t in tmp.values():
                 t.unlink(missing_ok=True)
             with h5py.File(tmp[paths[0].name], "w") as h5:
-                write_provenance(h5, self.name, ctx.scene, hashes, ctx.options)
+                write_provenance(h5, self.name, ctx.scene, hashes, ctx.options, ctx.build_dir)
                 work(h5, tmp)
                 h5.attrs["elapsed_s"] = time.monotonic() - start
             for p in paths[1:]:
