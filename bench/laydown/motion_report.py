@@ -56,6 +56,8 @@ def main() -> None:
     ap.add_argument("--path-limit", type=float, default=10.0, metavar="UM",
                     help="with --paths: the mass share of fibers whose path exceeds this (um)")
     a = ap.parse_args()
+    if a.paths is not None and (a.paths < 0.0 or a.path_limit <= 0.0):
+        ap.error("--paths needs T0 >= 0 ms and --path-limit > 0 um")
     work = a.run / "laydown" / "work"
     fiber_of: dict[int, tuple[int, int]] = {}
     # the generated fibers' nodes file (the working folder's copy of a resumed run lists only the
@@ -69,17 +71,12 @@ def main() -> None:
     frames = read_dump(work / "traj.dump")
     if a.until is not None:
         frames = [fr for fr in frames if fr.step <= round(a.until * 1e-3 / a.dt)]
-    if a.paths is not None and (a.paths < 0.0 or a.path_limit <= 0.0):
-        ap.error("--paths needs T0 >= 0 ms and --path-limit > 0 um")
     print(f"| t (ms) | fibers | mass share > {a.speed * 1e3:.3g} mm/s: all / horizontal / vertical | "
           f"{a.fraction:g}-mass speed |v| / |v_z| (mm/s) | node height 50 / 90 / 99 % (um) |")
     print("|---|---|---|---|---|")
     for fr in frames[::a.every]:
         c = fr.columns
-        fid = np.array([fiber_of[int(i)][0] for i in fr.ids])
-        fibers, inv = np.unique(fid, return_inverse=True)
-        m = np.bincount(inv, weights=c["mass"])
-        v = np.stack([np.bincount(inv, weights=c["mass"] * c[k]) for k in ("vx", "vy", "vz")], 1) / m[:, None]
+        fid, fibers, m, v = fiber_means(fr, fiber_of, np.stack([c["vx"], c["vy"], c["vz"]], 1))
         w = m / m.sum()
         speed, horiz, vert = np.linalg.norm(v, axis=1), np.linalg.norm(v[:, :2], axis=1), np.abs(v[:, 2])
         height = frame_positions(c)[:, 2]  # z, or zu (laydown.walls periodic: unwrapped dump)
@@ -97,6 +94,19 @@ def main() -> None:
         paths_table(frames, fiber_of, round(a.paths * 1e-3 / a.dt), a.top or 10, a.path_limit)
 
 
+def fiber_means(fr: Frame, fiber_of: dict[int, tuple[int, int]], values: npt.NDArray[np.float64]
+                ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64],
+                           npt.NDArray[np.float64]]:
+    """Per fiber of a frame: the node's fiber IDs, the fibers present (ascending), their masses and
+    the mass-weighted means of ``values`` (one row of 3 per node: velocities, positions)."""
+    c = fr.columns
+    fid = np.array([fiber_of[int(i)][0] for i in fr.ids])
+    fibers, inv = np.unique(fid, return_inverse=True)
+    m = np.bincount(inv, weights=c["mass"])
+    means = np.stack([np.bincount(inv, weights=c["mass"] * values[:, k]) for k in range(3)], 1) / m[:, None]
+    return fid, fibers, m, means
+
+
 def paths_table(frames: list[Frame], fiber_of: dict[int, tuple[int, int]], from_step: int, top: int,
                 limit_um: float) -> None:
     """The fibers' centre-of-mass paths and displacements from the first frame at or after
@@ -108,12 +118,7 @@ def paths_table(frames: list[Frame], fiber_of: dict[int, tuple[int, int]], from_
     centres: list[dict[int, npt.NDArray[np.float64]]] = []
     mass: dict[int, float] = {}
     for fr in span:
-        c = fr.columns
-        fid = np.array([fiber_of[int(i)][0] for i in fr.ids])
-        fibers, inv = np.unique(fid, return_inverse=True)
-        m = np.bincount(inv, weights=c["mass"])
-        pos = frame_positions(c)
-        com = np.stack([np.bincount(inv, weights=c["mass"] * pos[:, k]) for k in range(3)], 1) / m[:, None]
+        _, fibers, m, com = fiber_means(fr, fiber_of, frame_positions(fr.columns))
         centres.append({int(f): com[k] for k, f in enumerate(fibers)})
         mass.update({int(f): float(m[k]) for k, f in enumerate(fibers)})
     kept = [f for f in centres[0] if all(f in cs for cs in centres)]
