@@ -133,6 +133,29 @@ def test_combinations_alternate_within_each_repetition(probe: Any) -> None:
         (0, 0, 1), (0, 1, 1), (0, 0, 2), (0, 1, 2), (1, 0, 1), (1, 1, 1), (1, 0, 2), (1, 1, 2)]
 
 
+def test_schedule_runs_each_count_of_copies_in_turn(probe: Any) -> None:
+    """--copies 1 2: per repetition all combinations alone, then all as two copies at once."""
+    assert probe.schedule([Path("A"), Path("B")], [2], 2, [1, 2]) == [
+        (0, 0, 2, 1), (0, 1, 2, 1), (0, 0, 2, 2), (0, 1, 2, 2),
+        (1, 0, 2, 1), (1, 1, 2, 1), (1, 0, 2, 2), (1, 1, 2, 2)]
+    assert probe.schedule([Path("A")], [1, 2], 1, [1]) == [
+        (k, b, r, 1) for k, b, r in probe.combinations([Path("A")], [1, 2], 1)]
+
+
+def test_summary_gives_the_gain_of_copies_side_by_side(probe: Any) -> None:
+    """Loop times 20 and 22 s alone, 30 and 26 s (two probes each) as two copies at once: medians
+    21 and 28 s, so the two together do 2 x 21 / 28 = 1.50 times the work of one alone."""
+    def row(n: int, loop: float) -> dict[str, Any]:
+        return {"friction": 0.5, "friction_stick": None, "build_index": 0, "build": "/b0", "ranks": 2,
+                "fiberdem": "sha256:" + "0" * 64, "exit": 0, "loop_s": loop, "cpu_s": loop, "final_state": "s",
+                "copies": n}
+    lines = probe.summary([row(1, 20.0), row(2, 30.0), row(2, 30.0), row(1, 22.0), row(2, 26.0), row(2, 26.0)])
+    assert "on 2 rank(s): loop 21.00 [20.00-22.00] s" in lines[1], lines
+    assert "on 2 rank(s), 2 copies at once: loop 28.00 [26.00-30.00] s" in lines[2], lines
+    assert lines[3] == "    2 copies together: 1.50 x the throughput of one alone", lines
+    assert lines[-1].startswith("  final states: identical (1 distinct of 6"), lines
+
+
 def test_summary_flags_different_final_states(probe: Any) -> None:
     def row(b: int, loop: float, cpu: float, state: str) -> dict[str, Any]:
         return {"friction": 0.5, "friction_stick": None, "build_index": b, "build": f"/b{b}",
@@ -159,6 +182,9 @@ def test_summary_flags_different_final_states(probe: Any) -> None:
     (["--builds", "BUILD", "--concurrency", "10"], "--concurrency", "1e5..1e10"),
     (["--builds", "BUILD", "BUILD", "--parallel", "2"], "--parallel", "one build"),
     (["--builds", "BUILD", "--repeat", "2", "--parallel", "2"], "--parallel", "--repeat 1"),
+    (["--builds", "BUILD", "--copies", "1", "2", "--parallel", "2"], "--parallel", "no --copies"),
+    (["--builds", "BUILD", "--copies", "0"], "--copies", f"1..{os.cpu_count() or 1}"),
+    (["--builds", "BUILD", "--copies", "1", "1"], "--copies", "each N once"),
 ])
 def test_bad_arguments_exit_2_before_anything_runs(run: Path, args: list[str], option: str,
                                                    allowed: str) -> None:
@@ -218,6 +244,7 @@ def test_two_builds_one_and_two_ranks_end_in_the_same_state(laydown_run: Path, f
         assert r["loop_s"] > 0.0 and r["cpu_s"] >= r["cpu_user_s"] > 0.0, r
         assert 0.0 < r["throughput_cores_before"] <= 2.5 and 0.0 < r["throughput_cores_after"] <= 2.5, r
         assert r["folder"].endswith(f"-b{r['build_index']}-np{r['ranks']}"), r
+        assert r["launch"] == ("mpirun --bind-to none -np 2" if r["ranks"] == 2 else ""), r
     assert rows[1]["build_revision"] == "69802b8-dirty"
     assert rows[0]["build_revision"] == build_revision(fiberdem_build)
     assert len({r["fiberdem"] for r in rows}) == 1
@@ -234,3 +261,27 @@ def test_two_builds_one_and_two_ranks_end_in_the_same_state(laydown_run: Path, f
     summary = proc.stdout[proc.stdout.index("setting friction 0.5\n"):]
     assert summary.count(" over 2 run(s)") == 4, summary
     assert "final states: identical (1 distinct of 8 probe(s))" in summary, summary
+
+
+@pytest.mark.system
+def test_copies_side_by_side_end_in_the_same_state(laydown_run: Path, fiberdem_build: Path, tmp_path: Path) -> None:
+    """--copies 1 2 on one rank: one probe alone, then two at the same time, each in its own
+    folder (-c0, -c1); every row records its count and copy, all three end in the same state, and
+    the table gives the gain of the two copies together."""
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("needs 2 cores")
+    out = tmp_path / "probe.json"
+    proc = run_script("--run", str(laydown_run), "--step", "1000", "--steps", "100", "--chunk", "50",
+                      "--settings", "0.5:", "--builds", str(fiberdem_build), "--copies", "1", "2",
+                      "--probes", str(tmp_path / "probes"), "--out", str(out))
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    rows = json.loads(out.read_text())["rows"]
+    assert sorted((r["copies"], r["copy"]) for r in rows) == [(1, 0), (2, 0), (2, 1)], rows
+    for r in rows:
+        assert r["exit"] == 0 and r["simulated_steps"] == 100 and r["loop_s"] > 0.0, r
+        assert r["folder"].endswith(f"-c{r['copy']}"), r
+    assert len({r["folder"] for r in rows if r["copies"] == 2}) == 2
+    states = {r["final_state"] for r in rows}
+    assert len(states) == 1 and states.pop().startswith("sha256:"), rows
+    assert "2 copies together: " in proc.stdout and "final states: identical (1 distinct of 3" in proc.stdout, \
+        proc.stdout[-2000:]

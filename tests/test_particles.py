@@ -243,7 +243,7 @@ def test_stage_on_two_ranks(tmp_path: Path, real_build: Path, fiberform_cmd: lis
     proc = _stage(fiberform_cmd, work, real_build)
     assert proc.returncode == 0, proc.stderr
     report = (work / "out" / "particles" / "report.md").read_text()
-    assert "mpirun -np 2" in report
+    assert "mpirun --bind-to none -np 2" in report
 
 
 def test_failed_run_leaves_no_products(

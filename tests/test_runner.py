@@ -112,11 +112,11 @@ def test_ranks_and_oversubscription(monkeypatch: pytest.MonkeyPatch) -> None:
     if shutil.which("mpirun") is None:
         pytest.skip("mpirun not installed")
     cmd = build_command(["a"], cores + 1, oversubscribe=True)
-    assert cmd[1:] == ["-np", str(cores + 1), "--oversubscribe", "a"]
+    assert cmd[1:] == ["--bind-to", "none", "-np", str(cores + 1), "--oversubscribe", "a"]
     assert Path(cmd[0]).name == "mpirun"
     assert "--allow-run-as-root" not in cmd
     if cores >= 2:
-        assert build_command(["a"], 2)[1:] == ["-np", "2", "a"]
+        assert build_command(["a"], 2)[1:] == ["--bind-to", "none", "-np", "2", "a"]
 
 
 def test_mpmd_command_counts_all_ranks() -> None:
@@ -130,9 +130,25 @@ def test_mpmd_command_counts_all_ranks() -> None:
     if shutil.which("mpirun") is None:
         pytest.skip("mpirun not installed")
     cmd = mpmd_command([(["a", "x"], cores), (["b"], 1)], oversubscribe=True)
-    assert cmd[1:] == ["--oversubscribe", "-np", str(cores), "a", "x", ":", "-np", "1", "b"]
+    assert cmd[1:] == ["--bind-to", "none", "--oversubscribe", "-np", str(cores), "a", "x", ":", "-np", "1", "b"]
     if cores >= 2:
-        assert mpmd_command([(["a"], 1), (["b"], 1)])[1:] == ["-np", "1", "a", ":", "-np", "1", "b"]
+        assert mpmd_command([(["a"], 1), (["b"], 1)])[1:] == ["--bind-to", "none", "-np", "1", "a", ":", "-np", "1",
+                                                              "b"]
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None or (os.cpu_count() or 1) < 2, reason="mpirun, 2 cores")
+def test_local_mpi_ranks_are_not_bound_to_cores() -> None:
+    """Each rank of a local 2-rank run may use every core of the machine (Open MPI would otherwise
+    pin rank i of every job to core i, so two jobs side by side share their busy rank's core):
+    the ranks report their CPU affinity."""
+    import subprocess
+    import sys
+
+    show = [sys.executable, "-c", "import os; print(sorted(os.sched_getaffinity(0)))"]
+    everything = sorted(os.sched_getaffinity(0))
+    proc = subprocess.run(build_command(show, 2), env=build_env(), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split("\n")[:2] == [str(everything)] * 2, proc.stdout
 
 
 @pytest.mark.skipif(

@@ -41,7 +41,8 @@ fibers starting to pile up), made by
 Every probe ends with a dump of the final state (``final.dump``: every node's id, x, y, z, vx, vy,
 vz with ``%.17g``, sorted by id) and reports its sha256 (``final_state``), the CPU time of the
 whole run (``cpu_s``: user + sys of fiberdem, or of mpirun and all its ranks, from os.wait4) and the
-build (``build``, ``fiberdem``: the sha256 of its bin/fiberdem, ``build_revision``: the commit its
+build (``launch``: the mpirun options, empty on one rank; ``build``, ``fiberdem``: the sha256 of its
+bin/fiberdem, ``build_revision``: the commit its
 binaries come from, the build folder's ``REVISION`` file that every build writes,
 cmake/WriteRevision.cmake; ``unknown`` for a build folder made before that file existed).
 
@@ -60,6 +61,17 @@ vCPU of this kind of machine gives 1.0-2.0 cores). Two builds, 1 and 2 ranks, th
 
     .venv/bin/python bench/laydown/probe_friction.py --run RUN --step 36000 --steps 300 \\
         --settings 0.5: --builds /work/build-old /work/build-new --ranks 1 2 --repeat 3 --concurrency
+
+Side by side: ``--copies N [N ...]`` (default 1) runs every combination also as N copies at the
+same time (folders suffixed ``-c<i>``; rows record ``copies`` and ``copy``), alternating with the
+other counts within each repetition (copies outermost: all combinations alone, then all as two
+copies, ...). The table then gives each count's loop time and, for N > 1, the throughput of the N
+copies together relative to one copy alone (N x median loop alone / median loop of a copy): how
+much a second lay-down beside the first gains on this machine (docs/bench/laydown.md "Two points
+side by side"):
+
+    .venv/bin/python bench/laydown/probe_friction.py --run RUN --step 36000 --steps 300 \\
+        --settings 0.5: --ranks 2 --copies 1 2 --repeat 3 --concurrency
 """
 
 from __future__ import annotations
@@ -228,6 +240,9 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
                            "wall_s": wall, "folder": str(folder), "build": str(build),
                            "fiberdem": file_hash(fiberdem)}
     row["build_revision"] = build_revision(build)
+    # how the ranks were started (the mpirun options, e.g. --bind-to none; "" without mpirun)
+    prefix = argv[:len(argv) - 5]
+    row["launch"] = " ".join([Path(prefix[0]).name, *prefix[1:]]) if prefix else ""
     row.update({"ranks": ranks, "cpu_s": user + system, "cpu_user_s": user, "cpu_sys_s": system})
     final = folder / FINAL_DUMP
     if final.is_file():
@@ -252,6 +267,13 @@ def combinations(builds: list[Path], ranks: list[int], repeat: int) -> list[tupl
     """(repetition, build index, ranks) in the order they run: per repetition every combination,
     ranks outer and builds inner (A1 B1 A2 B2 ...)."""
     return [(k, b, r) for k in range(repeat) for r in ranks for b in range(len(builds))]
+
+
+def schedule(builds: list[Path], ranks: list[int], repeat: int, copies: list[int]) -> list[tuple[int, int, int, int]]:
+    """(repetition, build index, ranks, copies at once) in the order they run: per repetition each
+    count of copies (outermost), within it the combinations as :func:`combinations` orders them."""
+    return [(k, b, r, n) for k in range(repeat) for n in copies
+            for _, b, r in combinations(builds, ranks, 1)]
 
 
 def concurrency(loops: float) -> float | None:
@@ -286,10 +308,10 @@ def summary(rows: list[dict[str, Any]]) -> list[str]:
         settings.setdefault((r["friction"], r["friction_stick"]), []).append(r)
     for (mu, stick), group in settings.items():
         out.append(f"setting friction {mu:g}" + (f", stick {stick:g}" if stick is not None else ""))
-        combos: dict[tuple[int, str, int], list[dict[str, Any]]] = {}
+        combos: dict[tuple[int, str, int, int], list[dict[str, Any]]] = {}
         for r in group:
-            combos.setdefault((r.get("build_index", 0), r["build"], r["ranks"]), []).append(r)
-        for (b, build, ranks), runs in combos.items():
+            combos.setdefault((r.get("build_index", 0), r["build"], r["ranks"], r.get("copies", 1)), []).append(r)
+        for (b, build, ranks, n), runs in combos.items():
             done = [r for r in runs if "loop_s" in r]
             failed = len(runs) - len(done)
             if done:
@@ -297,8 +319,13 @@ def summary(rows: list[dict[str, Any]]) -> list[str]:
                          f"CPU {spread([r['cpu_s'] for r in done])} s")
             else:
                 times = "no loop time"
-            out.append(f"  build {b} ({build}, {runs[0]['fiberdem'][:19]}) on {ranks} rank(s): "
+            at_once = f", {n} copies at once" if n > 1 else ""
+            out.append(f"  build {b} ({build}, {runs[0]['fiberdem'][:19]}) on {ranks} rank(s){at_once}: "
                        f"{times} over {len(done)} run(s)" + (f", {failed} failed" if failed else ""))
+            alone = [r["loop_s"] for r in combos.get((b, build, ranks, 1), []) if "loop_s" in r]
+            if n > 1 and done and alone:
+                gain = n * statistics.median(alone) / statistics.median([r["loop_s"] for r in done])
+                out.append(f"    {n} copies together: {gain:.2f} x the throughput of one alone")
         states = {r.get("final_state") for r in group}
         same = len(states) == 1 and None not in states
         out.append(f"  final states: {'identical' if same else 'DIFFERENT'} "
@@ -329,6 +356,8 @@ def main() -> int:
     ap.add_argument("--landing", choices=("limit", "predict"), default=None,
                     help="laydown.newton_landing in every probe (default: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
+    ap.add_argument("--copies", type=int, nargs="+", default=[1], metavar="N",
+                    help="run every combination also as N copies at the same time (default 1)")
     ap.add_argument("--builds", type=Path, nargs="+", metavar="DIR",
                     default=[Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build"))],
                     help="build folders (their bin/fiberdem) to compare (default: $FIBERFORM_BUILD or build)")
@@ -362,26 +391,39 @@ def main() -> int:
             return bad("--builds", f"{given}/bin/fiberdem not found (each DIR a build folder)")
     if args.concurrency is not None and not 1e5 <= args.concurrency <= 1e10:
         return bad("--concurrency", f"LOOPS must be 1e5..1e10, got {args.concurrency:g}")
-    order = combinations(builds, args.ranks, args.repeat)
-    if args.parallel > 1 and len(order) > 1:
-        return bad("--parallel", "2 only with one build, one R and --repeat 1 "
+    if not all(1 <= n <= cores for n in args.copies) or len(set(args.copies)) != len(args.copies):
+        return bad("--copies", f"each N once, 1..{cores} (the cores), got {' '.join(map(str, args.copies))}")
+    order = schedule(builds, args.ranks, args.repeat, args.copies)
+    if args.parallel > 1 and (len(order) > 1 or args.copies != [1]):
+        return bad("--parallel", "2 only with one build, one R, --repeat 1 and no --copies "
                    "(timing probes run one at a time)")
     several = len(builds) > 1 or args.ranks != [1]
-    jobs = [(s, k, b, r) for s in args.settings for k, b, r in order]
+    side_by_side = max(args.copies) > 1
+    jobs = [(s, k, b, r, n) for s in args.settings for k, b, r, n in order]
     load = os.getloadavg()[0]
     before = concurrency(args.concurrency) if args.concurrency is not None else None
 
-    def probe(job: tuple[str, int, int, int]) -> dict[str, Any]:
-        setting, k, b, r = job
+    def probe(job: tuple[str, int, int, int, int], copy: int = 0) -> dict[str, Any]:
+        setting, k, b, r, n = job
+        tag = (f"-b{b}-np{r}" if several else "") + (f"-c{copy}" if side_by_side else "")
         row = run_probe(args.run, args.step, args.steps, args.chunk, setting, builds[b], args.probes,
-                        args.anderson, args.tolerance, args.timestep, args.landing,
-                        ranks=r, tag=f"-b{b}-np{r}" if several else "")
+                        args.anderson, args.tolerance, args.timestep, args.landing, ranks=r, tag=tag)
         row.update({"build_index": b, "repetition": k})
+        if side_by_side:
+            row.update({"copies": n, "copy": copy})
         return row
+
+    def copies_at_once(job: tuple[str, int, int, int, int]) -> list[dict[str, Any]]:
+        """The job's ``copies`` probes started together (one thread each)."""
+        n = job[4]
+        if n == 1:
+            return [probe(job)]
+        with ThreadPoolExecutor(max_workers=n) as side:
+            return list(side.map(lambda i: probe(job, i), range(n)))
 
     rows: list[dict[str, Any]] = []
     with ThreadPoolExecutor(max_workers=args.parallel) as pool:
-        for r in pool.map(probe, jobs):
+        for r in (row for batch in pool.map(copies_at_once, jobs) for row in batch):
             r["parallel"] = args.parallel
             r["load_average_before"] = load
             r["machine"] = machine_info()

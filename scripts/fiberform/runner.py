@@ -90,8 +90,18 @@ def _cores() -> int:
     return os.cpu_count() or 1
 
 
+#: mpirun's options of every local run: no binding of ranks to cores. Open MPI binds rank i of
+#: every mpirun to core i by default (with at most 2 ranks per job), so two jobs side by side
+#: (sweep --jobs, campaign points at once) put both jobs' busy rank 0 on core 0. Measured on the
+#: S3 sheet (one contact cluster: one busy rank per job, docs/bench/laydown.md "Two points side by
+#: side"): two 2-rank probes at once each took 38 s against 18 s alone. Batch scripts
+#: (fiberform.executors) keep the scheduler's binding within their allocation.
+MPIRUN_OPTIONS = ("--bind-to", "none")
+
+
 def build_command(cmd: Sequence[str], ranks: int = 1, oversubscribe: bool = False) -> list[str]:
-    """The argument list actually started: ``cmd`` itself, or ``mpirun -np N`` + ``cmd``."""
+    """The argument list actually started: ``cmd`` itself, or ``mpirun --bind-to none -np N`` +
+    ``cmd`` (:data:`MPIRUN_OPTIONS`)."""
     if isinstance(cmd, (str, bytes)) or not cmd:
         raise ConfigError("a command is a non-empty list of arguments, not a string")
     if not all(isinstance(a, str) for a in cmd):
@@ -109,7 +119,7 @@ def build_command(cmd: Sequence[str], ranks: int = 1, oversubscribe: bool = Fals
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise ConfigError("mpirun not found on PATH (install openmpi-bin) but ranks > 1")
-    prefix = [mpirun, "-np", str(ranks)]
+    prefix = [mpirun, *MPIRUN_OPTIONS, "-np", str(ranks)]
     if ranks > cores:
         prefix.append("--oversubscribe")
     return prefix + list(cmd)
@@ -133,7 +143,7 @@ def mpmd_command(parts: Sequence[tuple[Sequence[str], int]], oversubscribe: bool
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise ConfigError("mpirun not found on PATH (install openmpi-bin)")
-    return [mpirun, *(["--oversubscribe"] if total > _cores() else []), *out]
+    return [mpirun, *MPIRUN_OPTIONS, *(["--oversubscribe"] if total > _cores() else []), *out]
 
 
 def build_env(env_extra: Mapping[str, str] | None = None) -> dict[str, str]:
