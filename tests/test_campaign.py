@@ -565,6 +565,54 @@ def test_runner_resume_reaches_every_sweep(tmp_path: Path, monkeypatch: pytest.M
                                                       "campaign_A_circular_pressure_001"]
 
 
+def test_runner_runs_points_side_by_side(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """run.py --points-at-once 2 (tiny campaign, points A and B): the two points' `fiberform sweep`
+    run at the same time (each stand-in sweep waits at a two-party barrier, which times out if they
+    run one after the other), each writes its output and its pressure presses' lines to
+    RUNS/logs/GROUP.log, and a sweep that fails is recorded under its own group while the other
+    point's results stay. Out-of-range values and --submit are refused with exit 2."""
+    import threading
+
+    from bench_scripts import load_bench_script
+
+    runner = load_bench_script("bench/thesis/run.py", "thesis_campaign_run_at_once")
+    camp = write_tiny_campaign(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    barrier = threading.Barrier(2, timeout=30)
+    met: list[str] = []
+    real_run = subprocess.run
+
+    def run(cmd: list[str], *args: Any, **kwargs: Any) -> subprocess.CompletedProcess[Any]:
+        if "sweep" not in cmd:
+            return real_run(cmd, *args, **kwargs)
+        scene = Path(str(cmd[cmd.index("sweep") + 1])).stem
+        kwargs["stdout"].write(f"stand-in sweep of {scene}\n")
+        barrier.wait()  # BrokenBarrierError (a failed group) unless the other sweep runs meanwhile
+        met.append(scene)
+        return subprocess.CompletedProcess(cmd, 3 if scene.startswith("B-") else 0)
+
+    monkeypatch.setattr(runner, "subprocess", type("StandIn", (), {"run": staticmethod(run),
+                                                                    "STDOUT": subprocess.STDOUT}))
+    base = ["run.py", "--campaign", str(camp / "campaign.yaml"), "--runs", "runs/c", "--points", "A,B",
+            "--sections", "circular", "--out", str(tmp_path / "r.json")]
+    for bad in (["--points-at-once", "0"], ["--points-at-once", "65"], ["--points-at-once", "2", "--submit", "slurm"]):
+        monkeypatch.setattr(sys, "argv", [*base, *bad])
+        assert runner.main() == 2, bad
+    assert not (tmp_path / "r.json").exists()
+    monkeypatch.setattr(sys, "argv", [*base, "--points-at-once", "2"])
+    assert runner.main() == 1  # B's sweep failed
+    assert sorted(met) == ["A-circular", "B-circular"]
+    res = json.loads((tmp_path / "r.json").read_text())
+    logs = tmp_path / "runs" / "c" / "logs"
+    assert set(res["failures"]) == {"B-circular"}
+    assert res["failures"]["B-circular"] == f"fiberform sweep exit 3 (see {Path('runs/c/logs/B-circular.log')})"
+    for group, status in (("A-circular", 0), ("B-circular", 3)):
+        text = (logs / f"{group}.log").read_text()
+        assert f"stand-in sweep of {group}" in text and f"== {group}: exit {status} after" in text, text
+        assert f"== {group}-pressure: 2 seed(s) wait for their lay-down" in text, text
+    assert sorted(res["pending"]) == ["A-circular-pressure", "B-circular-pressure"]
+
+
 @pytest.mark.system
 def test_runner_runs_a_tiny_campaign_and_resumes(tmp_path: Path, build_dir: Path) -> None:
     if not (build_dir / "bin" / "fiberdem").is_file():

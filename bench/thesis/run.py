@@ -16,7 +16,12 @@ campaign; a lay-down that was killed (a time limit, Ctrl-C, a crash) continues f
 LIGGGHTS restart file only with ``--resume`` (passed to every ``fiberform sweep``, the pressure
 presses' included); without it that lay-down starts over and its restart files are removed.
 ``--jobs N`` runs up to N seeds of a point at once on this machine (``fiberform sweep
---jobs``). ``--submit slurm|pbs`` submits each sweep as job arrays instead; the pressure presses of
+--jobs``). ``--points-at-once N`` runs up to N point-section groups at once, each its own
+``fiberform sweep`` (and pressure presses), its output in ``RUNS/logs/<group>.log``: once a sheet
+has formed, a lay-down's contact cluster is solved by one rank (docs/models/contact.md section 9),
+so on a small machine two points side by side use the cores that one point leaves idle
+(docs/bench/laydown.md, "Two points side by side"). The number of lay-downs at once is the
+product of the two. ``--submit slurm|pbs`` submits each sweep as job arrays instead; the pressure presses of
 a point can only be submitted once its sweep has finished the lay-downs and permeabilities (they
 are copied, not awaited by a job dependency): run the same command again then (and without
 --submit, or with --collect-only, once everything is done).
@@ -29,6 +34,8 @@ are copied, not awaited by a job dependency): run the same command again then (a
                                                               # from their restart files
     .venv/bin/python bench/thesis/run.py --points S3 --sections circular --seeds 1 --keep
                                                               # add S3, keep the file's other points
+    .venv/bin/python bench/thesis/run.py --points S4,S5 --sections circular --seeds 1 --keep \
+        --points-at-once 2                                    # S4 and S5 side by side
 
 Writes bench/thesis/results/campaign[-reduced].json: the machine, per variant (point, section,
 seed) the collected metrics and stage wall times with the ranks each stage ran on, per point the
@@ -56,9 +63,13 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import yaml
 
@@ -116,6 +127,91 @@ def _kept_file(out: Path, current: dict[str, Any] | None, sem_factor: float) -> 
     return previous
 
 
+@dataclass
+class GroupJob:
+    """One point-section group: its sweep's command line, its scene and its pressure scene (None
+    without the campaign's pressure_press)."""
+    group: str
+    cmd: list[str]
+    scene: Path
+    pressure_scene: Path | None
+
+
+@dataclass
+class GroupOutcome:
+    failures: dict[str, str] = field(default_factory=dict)
+    pending: dict[str, dict[str, str]] = field(default_factory=dict)
+
+
+def print_line(line: str) -> None:
+    print(line, flush=True)
+
+
+def _run_group(job: GroupJob, seeds: int, build: Path, opts: Any, args: argparse.Namespace,
+               emit: Callable[[str], None], log: IO[str] | None) -> GroupOutcome:
+    """The group's ``fiberform sweep`` (its output to ``log``, or inherited with None), then its
+    pressure presses; the group's failures and waiting pressure presses."""
+    out = GroupOutcome()
+    group = job.group
+    emit(f"== {group}: fiberform {' '.join(job.cmd[3:])}")
+    t0 = time.monotonic()
+    proc = subprocess.run(job.cmd, stdout=log, stderr=subprocess.STDOUT if log else None)
+    emit(f"== {group}: exit {proc.returncode} after {time.monotonic() - t0:.0f} s")
+    if proc.returncode != 0:
+        out.failures[group] = (f"fiberform sweep exit {proc.returncode} "
+                               f"({'see its output above' if log is None else 'see ' + log.name})")
+    if job.pressure_scene is None:
+        return out
+    emit(f"== {group}-pressure: the second press ({job.pressure_scene}), lay-downs taken over from "
+         f"{Path(f'{load_scene(job.scene).output_dir}-sweep')}")
+    try:
+        pr = cp.run_pressure_sweep(job.scene, job.pressure_scene, seeds, build, emit, opts, jobs=args.jobs,
+                                   resume=args.resume)
+    except FiberformError as exc:
+        out.failures[f"{group}-pressure"] = str(exc)
+        return out
+    if pr.waiting:
+        out.pending[f"{group}-pressure"] = pr.waiting
+        emit(f"== {group}-pressure: {len(pr.waiting)} seed(s) wait for their lay-down and permeability in "
+             f"{load_scene(job.scene).output_dir}-sweep (not laid down again)"
+             + (": run this command again once they are done" if args.submit else ""))
+    if pr.failed:
+        out.failures[f"{group}-pressure"] = (f"failed: {', '.join(pr.failed)} "
+                                             f"({'see the output above' if log is None else 'see ' + log.name})")
+    return out
+
+
+def _run_groups_at_once(jobs: list[GroupJob], at_once: int, logs: Path, seeds: int, build: Path, opts: Any,
+                        args: argparse.Namespace) -> list[GroupOutcome]:
+    """--points-at-once: up to ``at_once`` groups run side by side, each writing its output to
+    ``logs/<group>.log`` (appended: a resumed campaign keeps the earlier output); this process
+    prints when each starts and ends. The outcomes in the order of ``jobs``."""
+    lock = threading.Lock()
+
+    def one(job: GroupJob) -> GroupOutcome:
+        path = logs / f"{job.group}.log"
+        with lock:
+            print(f"== {job.group}: started, output in {path}", flush=True)
+        t0 = time.monotonic()
+        with path.open("a") as log:
+            def emit(line: str) -> None:
+                log.write(line + "\n")
+                log.flush()
+
+            try:
+                outcome = _run_group(job, seeds, build, opts, args, emit, log)
+            except Exception as exc:  # noqa: BLE001 - reported as the group's failure, the others go on
+                emit(f"== {job.group}: {type(exc).__name__}: {exc}")
+                outcome = GroupOutcome(failures={job.group: f"{type(exc).__name__}: {exc} (see {path})"})
+        with lock:
+            state = "failed: " + "; ".join(outcome.failures.values()) if outcome.failures else "done"
+            print(f"== {job.group}: {state} after {time.monotonic() - t0:.0f} s (output in {path})", flush=True)
+        return outcome
+
+    with ThreadPoolExecutor(max_workers=at_once) as pool:
+        return list(pool.map(one, jobs))
+
+
 def main() -> int:
     try:
         return _main()
@@ -138,6 +234,9 @@ def _main() -> int:
     ap.add_argument("--submit", choices=("slurm", "pbs"), help="submit job arrays instead of running here")
     ap.add_argument("--jobs", type=int, default=1, metavar="N",
                     help="seeds of a point run at once on this machine (fiberform sweep --jobs; not with --submit)")
+    ap.add_argument("--points-at-once", type=int, default=1, metavar="N",
+                    help="point-section groups run at once on this machine, each its own fiberform sweep, output "
+                         "in RUNS/logs/GROUP.log (not with --submit)")
     ap.add_argument("--collect-only", action="store_true", help="run nothing; tabulate what has finished")
     ap.add_argument("--resume", action="store_true",
                     help="a killed lay-down continues from its last restart file (fiberform sweep --resume, "
@@ -170,6 +269,9 @@ def _main() -> int:
     if not 1 <= args.jobs <= 64 or (args.jobs > 1 and args.submit):
         print(f"--jobs {args.jobs}: allowed 1..64, and only without --submit", file=sys.stderr)
         return 2
+    if not 1 <= args.points_at_once <= 64 or (args.points_at_once > 1 and args.submit):
+        print(f"--points-at-once {args.points_at_once}: allowed 1..64, and only without --submit", file=sys.stderr)
+        return 2
     out = args.out or HERE / "results" / ("campaign-reduced.json" if args.reduced else "campaign.json")
     current = None if c.pressure_press is None else c.pressure_press.model_dump()
     if args.keep:  # checked before anything runs (and read again at the end)
@@ -188,6 +290,7 @@ def _main() -> int:
     failures: dict[str, str] = {}
     pending: dict[str, dict[str, str]] = {}  # "A-circular-pressure" -> {variant: why it waits}
     opts = executors.batch_options(args.submit) if args.submit else None
+    jobs: list[GroupJob] = []
     t_start = time.monotonic()
     for p in chosen:
         for section in sections:
@@ -214,30 +317,16 @@ def _main() -> int:
                 cmd += ["--jobs", str(args.jobs)]
             if args.resume:
                 cmd.append("--resume")
-            print(f"== {group}: fiberform {' '.join(cmd[3:])}", flush=True)
-            t0 = time.monotonic()
-            proc = subprocess.run(cmd)
-            print(f"== {group}: exit {proc.returncode} after {time.monotonic() - t0:.0f} s", flush=True)
-            if proc.returncode != 0:
-                failures[group] = f"fiberform sweep exit {proc.returncode} (see its output above)"
-            if c.pressure_press is None:
-                continue
-            print(f"== {group}-pressure: the second press ({pressure_path}), lay-downs taken over from "
-                  f"{groups[group]}", flush=True)
-            try:
-                pr = cp.run_pressure_sweep(scene_path, pressure_path, seeds, build,
-                                           lambda line: print(line, flush=True), opts, jobs=args.jobs,
-                                           resume=args.resume)
-            except FiberformError as exc:
-                failures[f"{group}-pressure"] = str(exc)
-                continue
-            if pr.waiting:
-                pending[f"{group}-pressure"] = pr.waiting
-                print(f"== {group}-pressure: {len(pr.waiting)} seed(s) wait for their lay-down and permeability "
-                      f"in {groups[group]} (not laid down again)" + (": run this command again once they are done"
-                                                                    if args.submit else ""), flush=True)
-            if pr.failed:
-                failures[f"{group}-pressure"] = f"failed: {', '.join(pr.failed)} (see the output above)"
+            jobs.append(GroupJob(group, cmd, scene_path, pressure_path if c.pressure_press is not None else None))
+    if args.points_at_once == 1 or len(jobs) <= 1:
+        outcomes = [_run_group(job, seeds, build, opts, args, print_line, None) for job in jobs]
+    else:
+        logs = args.runs / "logs"
+        logs.mkdir(parents=True, exist_ok=True)
+        outcomes = _run_groups_at_once(jobs, args.points_at_once, logs, seeds, build, opts, args)
+    for outcome in outcomes:
+        failures.update(outcome.failures)
+        pending.update(outcome.pending)
 
     collected: dict[str, list[dict[str, str]]] = {}
     variants: list[dict[str, Any]] = []
