@@ -91,7 +91,7 @@ def test_case_point_is_the_shipped_case_scene(setup: tuple[cp.Campaign, list[cp.
     p = next(p for p in pts if p.name == case)
     shipped = read_scene_yaml((THESIS / f"case-{case}-{section}.yaml").read_text())
     # the scenes' own fiber contact (the campaign's fiber_contact override: test_fiber_contact_override)
-    own = c.model_copy(update={"fiber_contact": None})
+    own = c.model_copy(update={"fiber_contact": None, "solver": None})
     data = cp.point_scene(own, p, section, THESIS, Path("runs/x"))  # type: ignore[arg-type]
     press = data.pop("press")
     for d in (data, shipped):
@@ -109,6 +109,9 @@ def test_every_point_scene_is_valid(setup: tuple[cp.Campaign, list[cp.Sheet], li
             sc = parse_scene(data, p.name)
             assert sc.press is not None and sc.press.overlap_action == "stop"
             assert sc.laydown.fiber_contact == c.fiber_contact == "newton"
+            assert c.solver is not None
+            assert (sc.laydown.newton_tolerance, sc.laydown.anderson_depth) == (
+                c.solver.newton_tolerance, c.solver.anderson_depth) == (1.0e-5, 3)
             assert sc.fibers.target_mass_kg == pytest.approx(p.mass_kg, rel=1e-6)
             slab = sc.fiber_generation.placement_hi_m[2] - sc.fiber_generation.placement_lo_m[2]
             # placement heights are written with 7 significant digits (1e-9 m at 3 mm)
@@ -698,3 +701,29 @@ def test_pressure_presses_wait_for_their_laydown(tmp_path: Path, monkeypatch: py
     assert pr.sweep_dir == Path("runs/A-circular-pressure-sweep") and (pr.sweep_dir / "sweep.json").is_file()
     assert not (pr.sweep_dir / "jobs").exists() and not list(pr.sweep_dir.glob("campaign_*/*"))
     assert any("not submitted" in line for line in lines)
+
+
+def test_solver_settings_reach_every_point(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]],
+                                           tmp_path: Path) -> None:
+    """campaign.solver: each setting given reaches the point scene's laydown section (and the
+    generated fiberdem input), one left out keeps the case scene's; out-of-range values are
+    refused naming the field."""
+    from fiberform.stages import laydown
+
+    c, _, pts = setup
+    only_tol = c.model_copy(update={"solver": cp.CampaignSolver(newton_tolerance=3e-6)})
+    data = cp.point_scene(only_tol, pts[0], "circular", THESIS, Path("runs/x"))
+    case = read_scene_yaml((THESIS / c.base["circular"]).read_text())
+    assert data["laydown"]["newton_tolerance"] == 3e-6
+    assert data["laydown"].get("anderson_depth") == case["laydown"].get("anderson_depth")
+    full = cp.point_scene(c, pts[0], "circular", THESIS, Path("runs/x"))
+    assert (full["laydown"]["newton_tolerance"], full["laydown"]["anderson_depth"]) == (1.0e-5, 3)
+    beam = [line for line in laydown.render_input(parse_scene(full, "p"), 0.01).splitlines() if "fiber/beam" in line]
+    assert len(beam) == 1 and " newton_tol 1e-05 " in beam[0] and beam[0].endswith(" anderson 3"), beam
+    camp = tmp_path / "campaign.yaml"
+    for bad, field in (("{newton_tolerance: 0.5}", "newton_tolerance"), ("{anderson_depth: 9}", "anderson_depth"),
+                       ("{newton_max_iterations: 5}", "newton_max_iterations")):
+        camp.write_text((THESIS / "campaign.yaml").read_text().replace(
+            "solver: {newton_tolerance: 1.0e-5, anderson_depth: 3}", f"solver: {bad}"))
+        with pytest.raises(cp.ConfigError, match=field):
+            cp.load_campaign(camp)
