@@ -495,8 +495,91 @@ void test_candidates() {
   expect(!b.complete(c, a0, b0, r, margin), "candidate list stale after the bins are rebuilt");
 }
 
+// StaticBodies::build_bins stores the bins as one array over their box, or, when one segment lies
+// far from the others, as a hash map: in a tangle of random yarn segments, every element's hits
+// (element_segment_hits) are those of a brute-force test of every segment, in the order of the
+// segment ids, with the dense bins; with a segment 1 m away added (hash map) the hits are the same
+// bit for bit, and so are the node lookups (node_hits).
+void test_bins_dense_and_map() {
+  StaticBodies b;
+  unsigned long seed = 777;
+  auto uni = [&seed]() {
+    seed = seed * 6364136223846793005UL + 1442695040888963407UL;
+    return static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0);
+  };
+  const double L = 1e-3, R = 40e-6;
+  for (int y = 0; y < 30; ++y) {
+    Vec3 a{uni() * L, uni() * L, uni() * 0.2e-3};
+    for (int k = 0; k < 6; ++k) {
+      const Vec3 d{(uni() - 0.5) * 200e-6, (uni() - 0.5) * 200e-6, (uni() - 0.5) * 60e-6};
+      b.add_segment(a, a + d, R * (0.5 + uni()), y);
+      a = a + d;
+    }
+  }
+  const double r = 10e-6, margin = r + 1e-6, reach = r + margin + 150e-6;  // elements up to 100 um
+  b.build_bins(reach);
+  expect(b.dense_bins(), "bins of a compact tangle: one array");
+  std::vector<Vec3> ends;
+  for (int e = 0; e < 2000; ++e) {
+    const Vec3 a0{uni() * L, uni() * L, uni() * 0.2e-3};
+    ends.push_back(a0);
+    ends.push_back(a0 + Vec3{(uni() - 0.5) * 100e-6, (uni() - 0.5) * 100e-6, (uni() - 0.5) * 40e-6});
+  }
+  std::vector<std::vector<BodyHit>> dense(ends.size() / 2);
+  std::vector<std::vector<BodyHit>> node_dense(ends.size());
+  int missing = 0, extra = 0, seen = 0;
+  for (std::size_t e = 0; e < dense.size(); ++e) {
+    const Vec3 xa = ends[2 * e], xb = ends[2 * e + 1];
+    b.element_segment_hits(xa, xb, r, margin, -1, dense[e]);
+    std::vector<int> want;  // every segment closer than margin, by brute force
+    const auto &segs = b.segments();
+    for (std::size_t id = 0; id < segs.size(); ++id) {
+      double se, ty;
+      closest_params_segment_segment(xa, xb, segs[id].a, segs[id].b, se, ty);
+      const double dist = beam::norm(lerp(xa, xb, se) - lerp(segs[id].a, segs[id].b, ty));
+      if (dist - segs[id].radius - r < margin && dist > 0.0) want.push_back(static_cast<int>(id));
+    }
+    std::vector<int> got;
+    for (const BodyHit &h : dense[e]) got.push_back(h.seg);
+    seen += static_cast<int>(got.size());
+    if (got != want) (got.size() < want.size() ? missing : extra) += 1;
+  }
+  expect(missing == 0 && extra == 0, "dense bins: the hits of every segment within margin, in id order",
+         missing, extra);
+  expect(seen > 500, "dense bins: elements near yarns", seen, 500);
+  for (std::size_t k = 0; k < ends.size(); ++k) {
+    BodyHit out[StaticBodies::kMaxHits];
+    const int n = b.node_hits(ends[k], r, margin, out);
+    node_dense[k].assign(out, out + n);
+  }
+  b.add_segment({1.0, 1.0, 1.0}, {1.0 + 100e-6, 1.0, 1.0}, R, 99);  // 1 m away
+  b.build_bins(reach);
+  expect(!b.dense_bins(), "bins with a far segment: the hash map");
+  int differ = 0;
+  auto same = [](const BodyHit &p, const BodyHit &q) {
+    return p.seg == q.seg && p.h == q.h && p.s == q.s && p.t == q.t && p.n.x == q.n.x && p.n.y == q.n.y &&
+           p.n.z == q.n.z && p.r2 == q.r2;
+  };
+  for (std::size_t e = 0; e < dense.size(); ++e) {
+    std::vector<BodyHit> hits;
+    b.element_segment_hits(ends[2 * e], ends[2 * e + 1], r, margin, -1, hits);
+    bool eq = hits.size() == dense[e].size();
+    for (std::size_t q = 0; eq && q < hits.size(); ++q) eq = same(hits[q], dense[e][q]);
+    differ += eq ? 0 : 1;
+  }
+  for (std::size_t k = 0; k < ends.size(); ++k) {
+    BodyHit out[StaticBodies::kMaxHits];
+    const int n = b.node_hits(ends[k], r, margin, out);
+    bool eq = static_cast<std::size_t>(n) == node_dense[k].size();
+    for (int q = 0; eq && q < n; ++q) eq = same(out[q], node_dense[k][static_cast<std::size_t>(q)]);
+    differ += eq ? 0 : 1;
+  }
+  expect(differ == 0, "hash-map bins: the same hits as the dense bins, bit for bit", differ, 0);
+}
+
 int main() {
   test_geometry();
+  test_bins_dense_and_map();
   test_candidates();
   test_rect_sections();
   test_gap_gradient();

@@ -200,9 +200,19 @@ inline void gap_node_gradient(Vec3 a0, Vec3 a1, Vec3 b0, Vec3 b1, double s, doub
   for (int k = 0; k < 4; ++k) grad[k] = grad[k] + c1 * R1[k] + c2 * R2[k];
 }
 
+// A read-only run of segment ids (a bin's list, or a Candidates list).
+struct IdSpan {
+  const int *p = nullptr;
+  std::size_t n = 0;
+  const int *begin() const { return p; }
+  const int *end() const { return p + n; }
+  bool empty() const { return n == 0; }
+};
+
 class StaticBodies {
  public:
   static constexpr int kMaxHits = 8;  // yarns acting on one element at once
+  static constexpr double kDenseCells = 1 << 22;  // dense bins up to this many cells (or 8 x the entries)
   struct Segment {
     Vec3 a, b, c;  // ends and centre (m)
     double radius = 0, half = 0;
@@ -260,7 +270,12 @@ class StaticBodies {
   const std::vector<Plane> &planes() const { return planes_; }
 
   // Bins of segment capsules reaching `reach` (m) beyond each yarn surface: a point's bin then holds
-  // every segment whose surface is within `reach` of it.
+  // every segment whose surface is within `reach` of it, in the order of the segments' ids.
+  // Stored as one array over the bounding box of the bins in use (two counting passes, no
+  // allocation once the arrays have grown: fix fiber/dlvo/step rebuilds the fiber bins every step,
+  // where the hash map of bins took a fifth of a formed sheet's run time); a box of more cells than
+  // kDenseCells or 8 x the entries (a segment far from the others) falls back to a hash map of the
+  // bins in use. Both give the same lists.
   void build_bins(double reach) {
     reach_ = std::max(reach, reach_);
     reset_bins();
@@ -277,23 +292,67 @@ class StaticBodies {
     size_ = std::max(rmax, lmax);
     const double r = std::max(rmax, reach_);
     for (int k = 0; k < 3; ++k) lo_[k] -= 2.0 * size_;
-    for (int id = 0; id < static_cast<int>(segs_.size()); ++id) {
+    // each segment's range of bins, and the box of all of them
+    ranges_.resize(segs_.size());
+    int glo[3], ghi[3];
+    for (int k = 0; k < 3; ++k) {
+      glo[k] = std::numeric_limits<int>::max();
+      ghi[k] = std::numeric_limits<int>::min();
+    }
+    double entries = 0.0;
+    for (std::size_t id = 0; id < segs_.size(); ++id) {
       const Segment &s = segs_[id];
-      int lo[3], hi[3];
+      BinRange &g = ranges_[id];
+      double n = 1.0;
       for (int k = 0; k < 3; ++k) {
-        lo[k] = static_cast<int>(std::floor((std::min(s.a[k], s.b[k]) - s.radius - r - lo_[k]) / size_));
-        hi[k] = static_cast<int>(std::floor((std::max(s.a[k], s.b[k]) + s.radius + r - lo_[k]) / size_));
+        g.lo[k] = static_cast<int>(std::floor((std::min(s.a[k], s.b[k]) - s.radius - r - lo_[k]) / size_));
+        g.hi[k] = static_cast<int>(std::floor((std::max(s.a[k], s.b[k]) + s.radius + r - lo_[k]) / size_));
+        glo[k] = std::min(glo[k], g.lo[k]);
+        ghi[k] = std::max(ghi[k], g.hi[k]);
+        n *= g.hi[k] - g.lo[k] + 1;
       }
-      for (int a = lo[0]; a <= hi[0]; ++a)
-        for (int b = lo[1]; b <= hi[1]; ++b)
-          for (int c = lo[2]; c <= hi[2]; ++c) {
+      entries += n;
+    }
+    double cells = 1.0;
+    for (int k = 0; k < 3; ++k) cells *= static_cast<double>(ghi[k]) - glo[k] + 1.0;
+    dense_ = cells <= std::max(kDenseCells, 8.0 * entries);
+    if (dense_) {
+      for (int k = 0; k < 3; ++k) {
+        g0_[k] = glo[k];
+        gn_[k] = ghi[k] - glo[k] + 1;
+      }
+      const std::size_t nc = static_cast<std::size_t>(cells);
+      start_.assign(nc + 1, 0);
+      for (const BinRange &g : ranges_)
+        for (int a = g.lo[0]; a <= g.hi[0]; ++a)
+          for (int b = g.lo[1]; b <= g.hi[1]; ++b)
+            for (int c = g.lo[2]; c <= g.hi[2]; ++c) ++start_[dense_index(a, b, c) + 1];
+      for (std::size_t i = 0; i < nc; ++i) start_[i + 1] += start_[i];
+      items_.resize(static_cast<std::size_t>(start_[nc]));
+      fill_.assign(start_.begin(), start_.end() - 1);
+      for (std::size_t id = 0; id < ranges_.size(); ++id) {
+        const BinRange &g = ranges_[id];
+        for (int a = g.lo[0]; a <= g.hi[0]; ++a)
+          for (int b = g.lo[1]; b <= g.hi[1]; ++b)
+            for (int c = g.lo[2]; c <= g.hi[2]; ++c)
+              items_[static_cast<std::size_t>(fill_[dense_index(a, b, c)]++)] = static_cast<int>(id);
+      }
+      return;
+    }
+    for (std::size_t id = 0; id < ranges_.size(); ++id) {
+      const BinRange &g = ranges_[id];
+      for (int a = g.lo[0]; a <= g.hi[0]; ++a)
+        for (int b = g.lo[1]; b <= g.hi[1]; ++b)
+          for (int c = g.lo[2]; c <= g.hi[2]; ++c) {
             std::vector<int> &bin = bins_[key(a, b, c)];
             if (bin.empty()) ++bins_used_;
-            bin.push_back(id);
+            bin.push_back(static_cast<int>(id));
           }
     }
   }
   double reach() const { return reach_; }
+  // whether the last build_bins stored the bins as one array over their box (else a hash map)
+  bool dense_bins() const { return dense_; }
 
   // Yarns near element xa-xb of radius r: per yarn the closest segment, when h < margin.
   // The element must be shorter than reach() - r - margin for the lookup at its midpoint to be complete.
@@ -303,7 +362,7 @@ class StaticBodies {
                    const Candidates *cand = nullptr) const {
     scratch_.clear();
     if (cand && complete(*cand, xa, xb, r, margin)) {
-      if (cand->in_bin) hits_among(cand->ids, xa, xb, r, margin, -1, scratch_);
+      if (cand->in_bin) hits_among(IdSpan{cand->ids.data(), cand->ids.size()}, xa, xb, r, margin, -1, scratch_);
     } else {
       element_segment_hits(xa, xb, r, margin, -1, scratch_);
     }
@@ -316,8 +375,8 @@ class StaticBodies {
   // segment id and the parameter t of the contact point on it; appended to out. Same completeness
   // condition as element_hits.
   void element_segment_hits(Vec3 xa, Vec3 xb, double r, double margin, int skip, std::vector<BodyHit> &out) const {
-    const std::vector<int> *cand = lookup(0.5 * (xa + xb));
-    if (cand) hits_among(*cand, xa, xb, r, margin, skip, out);
+    const IdSpan cand = lookup(0.5 * (xa + xb));
+    if (!cand.empty()) hits_among(cand, xa, xb, r, margin, skip, out);
   }
   // The Candidates of element xa-xb for element_hits(..., r, margin, ..., &c) while its ends stay
   // within skin (m) of where they are now.
@@ -332,13 +391,13 @@ class StaticBodies {
     c.r = r;
     c.margin = margin;
     c.skin = skin;
-    const auto it = bins_.find(c.key);
-    c.in_bin = it != bins_.end();
+    const IdSpan bin = lookup(0.5 * (xa + xb));
+    c.in_bin = !bin.empty();
     if (!c.in_bin) return;
     // hits_among's tests with margin + skin (also a segment through the element's axis: dist 0)
     const Vec3 mid = 0.5 * (xa + xb);
     const double half_e = 0.5 * norm(xb - xa), wide = margin + skin;
-    for (int id : it->second) {
+    for (int id : bin) {
       const Segment &sg = segs_[static_cast<std::size_t>(id)];
       double se, ty;
       Vec3 d;
@@ -370,8 +429,7 @@ class StaticBodies {
     return true;
   }
   // element_segment_hits over the segments ids (a bin's list, or a Candidates list)
-  void hits_among(const std::vector<int> &ids, Vec3 xa, Vec3 xb, double r, double margin, int skip,
-                  std::vector<BodyHit> &out) const {
+  void hits_among(IdSpan ids, Vec3 xa, Vec3 xb, double r, double margin, int skip, std::vector<BodyHit> &out) const {
     const Vec3 mid = 0.5 * (xa + xb);
     const double half_e = 0.5 * norm(xb - xa);
     for (int id : ids) {
@@ -393,11 +451,11 @@ class StaticBodies {
  public:
   // Yarns near a node at x of radius r (single-node fibers).
   int node_hits(Vec3 x, double r, double margin, BodyHit out[kMaxHits]) const {
-    const std::vector<int> *cand = lookup(x);
-    if (!cand) return 0;
+    const IdSpan cand = lookup(x);
+    if (cand.empty()) return 0;
     int yarn[kMaxHits];
     int nhit = 0;
-    for (int id : *cand) {
+    for (int id : cand) {
       const Segment &sg = segs_[id];
       const Vec3 d = x - lerp(sg.a, sg.b, closest_param_point_segment(sg.a, sg.b, x));
       const double dist = norm(d);
@@ -420,18 +478,36 @@ class StaticBodies {
       for (auto &kv : bins_) kv.second.clear();
     }
     bins_used_ = 0;
+    dense_ = false;
   }
   static long key(int ix, int iy, int iz) { return (static_cast<long>(ix) * 4096 + iy) * 4096 + iz; }
-  long bin_key(Vec3 p) const {
-    const int bx = static_cast<int>(std::floor((p.x - lo_[0]) / size_));
-    const int by = static_cast<int>(std::floor((p.y - lo_[1]) / size_));
-    const int bz = static_cast<int>(std::floor((p.z - lo_[2]) / size_));
-    return key(bx, by, bz);
+  void bin_of(Vec3 p, int b[3]) const {
+    for (int k = 0; k < 3; ++k) b[k] = static_cast<int>(std::floor((p[k] - lo_[k]) / size_));
   }
-  const std::vector<int> *lookup(Vec3 p) const {
-    if (segs_.empty() || !bins_valid_) return nullptr;
-    auto it = bins_.find(bin_key(p));
-    return it == bins_.end() ? nullptr : &it->second;
+  long bin_key(Vec3 p) const {
+    int b[3];
+    bin_of(p, b);
+    return key(b[0], b[1], b[2]);
+  }
+  std::size_t dense_index(int a, int b, int c) const {
+    return (static_cast<std::size_t>(a - g0_[0]) * static_cast<std::size_t>(gn_[1]) +
+            static_cast<std::size_t>(b - g0_[1])) * static_cast<std::size_t>(gn_[2]) +
+           static_cast<std::size_t>(c - g0_[2]);
+  }
+  // the ids of p's bin (empty: no segment near p)
+  IdSpan lookup(Vec3 p) const {
+    if (segs_.empty() || !bins_valid_) return {};
+    int b[3];
+    bin_of(p, b);
+    if (dense_) {
+      for (int k = 0; k < 3; ++k)
+        if (b[k] < g0_[k] || b[k] >= g0_[k] + gn_[k]) return {};
+      const std::size_t i = dense_index(b[0], b[1], b[2]);
+      const std::size_t first = static_cast<std::size_t>(start_[i]);
+      return {items_.data() + first, static_cast<std::size_t>(start_[i + 1]) - first};
+    }
+    auto it = bins_.find(key(b[0], b[1], b[2]));
+    return it == bins_.end() ? IdSpan{} : IdSpan{it->second.data(), it->second.size()};
   }
   // keep the smallest gap per yarn
   static void insert(BodyHit out[kMaxHits], int yarn[kMaxHits], int &nhit, int y, double s, Vec3 n, double h,
@@ -454,7 +530,16 @@ class StaticBodies {
 
   std::vector<Segment> segs_;
   std::vector<Plane> planes_;
-  std::unordered_map<long, std::vector<int>> bins_;
+  struct BinRange {
+    int lo[3], hi[3];
+  };
+  std::vector<BinRange> ranges_;  // each segment's bins (build_bins)
+  // dense bins: the box g0_ .. g0_ + gn_ - 1 (bin indices), bin i holds items_[start_[i] .. start_[i + 1])
+  bool dense_ = false;
+  int g0_[3] = {0, 0, 0}, gn_[3] = {0, 0, 0};
+  std::vector<long> start_, fill_;
+  std::vector<int> items_;
+  std::unordered_map<long, std::vector<int>> bins_;  // else the bins in use
   mutable std::vector<BodyHit> scratch_;  // element_hits
   bool bins_valid_ = false;
   unsigned long generation_ = 0;  // bins built so far (Candidates made before a rebuild are stale)
