@@ -435,19 +435,18 @@ void test_gap_gradient() {
 
 }  // namespace
 
-// StaticBodies::Candidates (the per-step short list of StaticContactModel): element_hits over a
-// list made at (a0, b0) equals the full bin lookup, hit for hit and bit for bit, for elements moved
-// by up to 1.5 skin in random directions (beyond 0.999 skin the list is not complete and the lookup
-// is used), in a tangle of random yarn segments; a list of stale bins is not used.
-void test_candidates() {
-  StaticBodies b;
-  unsigned long seed = 12345;
-  auto uni = [&seed]() {  // a small LCG: the test's own numbers, no library generator's sequence
+// A small LCG: the tests' own numbers, no library generator's sequence (uniform in [0, 1)).
+struct Lcg {
+  unsigned long seed;
+  double operator()() {
     seed = seed * 6364136223846793005UL + 1442695040888963407UL;
     return static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0);
-  };
-  const double L = 1e-3, R = 50e-6;
-  for (int y = 0; y < 40; ++y) {
+  }
+};
+
+// `yarns` random yarns of 6 segments each in an L x L x 0.2 mm box, radii R x [0.5, 1.5)
+void add_tangle(StaticBodies &b, Lcg &uni, int yarns, double L, double R) {
+  for (int y = 0; y < yarns; ++y) {
     Vec3 a{uni() * L, uni() * L, uni() * 0.2e-3};
     for (int k = 0; k < 6; ++k) {
       const Vec3 d{(uni() - 0.5) * 200e-6, (uni() - 0.5) * 200e-6, (uni() - 0.5) * 60e-6};
@@ -455,6 +454,17 @@ void test_candidates() {
       a = a + d;
     }
   }
+}
+
+// StaticBodies::Candidates (the per-step short list of StaticContactModel): element_hits over a
+// list made at (a0, b0) equals the full bin lookup, hit for hit and bit for bit, for elements moved
+// by up to 1.5 skin in random directions (beyond 0.999 skin the list is not complete and the lookup
+// is used), in a tangle of random yarn segments; a list of stale bins is not used.
+void test_candidates() {
+  StaticBodies b;
+  Lcg uni{12345};
+  const double L = 1e-3;
+  add_tangle(b, uni, 40, L, 50e-6);
   const double r = 10e-6, margin = r + 1e-6, skin = r;
   b.build_bins(r + margin + 200e-6);
   int used = 0, fell_back = 0, hits_seen = 0, mismatches = 0;
@@ -502,20 +512,9 @@ void test_candidates() {
 // bit for bit, and so are the node lookups (node_hits).
 void test_bins_dense_and_map() {
   StaticBodies b;
-  unsigned long seed = 777;
-  auto uni = [&seed]() {
-    seed = seed * 6364136223846793005UL + 1442695040888963407UL;
-    return static_cast<double>(seed >> 11) * (1.0 / 9007199254740992.0);
-  };
+  Lcg uni{777};
   const double L = 1e-3, R = 40e-6;
-  for (int y = 0; y < 30; ++y) {
-    Vec3 a{uni() * L, uni() * L, uni() * 0.2e-3};
-    for (int k = 0; k < 6; ++k) {
-      const Vec3 d{(uni() - 0.5) * 200e-6, (uni() - 0.5) * 200e-6, (uni() - 0.5) * 60e-6};
-      b.add_segment(a, a + d, R * (0.5 + uni()), y);
-      a = a + d;
-    }
-  }
+  add_tangle(b, uni, 30, L, R);
   const double r = 10e-6, margin = r + 1e-6, reach = r + margin + 150e-6;  // elements up to 100 um
   b.build_bins(reach);
   expect(b.dense_bins(), "bins of a compact tangle: one array");
