@@ -23,7 +23,7 @@ help:
 	@echo "make demo      - install, build, run the default scene ($(SCENE)) into runs/"
 	@echo "make test      - install, build, run all tests (ctest + pytest)"
 	@echo "make setup     - install missing Debian packages, OpenFOAM headers, libPstream, build C++, Python venv"
-	@echo "make validate  - longer validation runs and the reduced thesis campaign (bench/thesis/run.py --reduced)"
+	@echo "make validate  - longer validation runs and the reduced thesis campaign (bench/thesis/run.py --reduced --points-at-once 2)"
 	@echo "make bench     - benchmarks (write JSON + PNG under bench/*/results)"
 
 setup: packages openfoam-headers openfoam-pstream build venv
@@ -56,7 +56,7 @@ test: setup
 
 validate: setup
 	@bash scripts/setup/run-tests.sh $(BUILD) --validate
-	$(VENV)/bin/python bench/thesis/run.py --reduced
+	$(VENV)/bin/python bench/thesis/run.py --reduced --points-at-once 2
 
 bench: setup
 	@bash bench/run-all.sh $(BUILD)
