@@ -501,8 +501,14 @@ void test_candidates() {
   b.element_candidates(a0, b0, r, margin, skin, c);
   expect(b.complete(c, a0, b0, r, margin), "candidate list complete where it was made");
   expect(!b.complete(c, a0, b0, r, 2 * margin), "candidate list: another margin is not covered");
+  // within (StaticContactModel keeps a list for the next steps): half the skin, per end
+  const Vec3 nudge{0.4 * skin, 0.0, 0.0}, shove{0.6 * skin, 0.0, 0.0};
+  expect(b.within(c, a0 + nudge, b0, r, margin, 0.5), "kept list: ends moved 0.4 skin");
+  expect(!b.within(c, a0, b0 + shove, r, margin, 0.5), "kept list: an end moved 0.6 skin is made again");
+  expect(b.complete(c, a0, b0 + shove, r, margin), "... though still complete for this iterate");
   b.build_bins(r + margin + 200e-6);
   expect(!b.complete(c, a0, b0, r, margin), "candidate list stale after the bins are rebuilt");
+  expect(!b.within(c, a0, b0, r, margin, 0.5), "kept list stale after the bins are rebuilt");
 }
 
 // StaticBodies::build_bins stores the bins as one array over their box, or, when one segment lies

@@ -408,8 +408,13 @@ class StaticBodies {
   // c still holds every segment within margin of element xa-xb of radius r (see Candidates); the
   // ends' moves are compared with 0.999 skin, a margin far above the rounding of the distances
   bool complete(const Candidates &c, Vec3 xa, Vec3 xb, double r, double margin) const {
+    return within(c, xa, xb, r, margin, 0.999);
+  }
+  // c may serve element xa-xb of radius r with `margin` for another step (StaticContactModel keeps
+  // the lists between steps): complete, and neither end has moved by `frac` x skin since it was made
+  bool within(const Candidates &c, Vec3 xa, Vec3 xb, double r, double margin, double frac) const {
     if (!c.valid || !bins_valid_ || c.generation != generation_ || c.r != r || c.margin != margin) return false;
-    const double lim = 0.999 * c.skin;
+    const double lim = frac * c.skin;
     const Vec3 da = xa - c.a0, db = xb - c.b0;
     if (!(dot(da, da) < lim * lim && dot(db, db) < lim * lim)) return false;
     return bin_key(0.5 * (xa + xb)) == c.key;
@@ -822,20 +827,44 @@ class StaticContactModel : public BodyContactModel {
                      double stick = kStick)
       : BodyContactModel(law, friction, stick), bodies_(bodies) {}
 
+  // a solve of one fiber without its id: its lists are not kept
+  void begin_fiber(int fiber) override {
+    BodyContactModel::begin_fiber(fiber);
+    fibers_.clear();
+    offsets_.clear();
+  }
+  // the fibers of the next solve (ids, and their first nodes plus the end: FixFiberBeam)
+  void begin_cluster(const std::vector<int> &fibers, const std::vector<int> &offsets) override {
+    BodyContactModel::begin_cluster(fibers, offsets);
+    fibers_ = fibers;
+    offsets_ = offsets;
+  }
   // per element the yarn segments that can come near it during this attempt (StaticBodies::
-  // Candidates, within the element's reach of its start position; an element that moves further
-  // is looked up in the bins as before): the Newton iterations then test a few segments instead of
-  // the bin's list (the lookup was a fifth of a lay-down's time, docs/bench/laydown.md)
+  // Candidates, within the element's reach of where the list was made; an element that moves
+  // further is looked up in the bins as before): the Newton iterations then test a few segments
+  // instead of the bin's list (the lookup was a fifth of a lay-down's time, docs/bench/laydown.md).
+  // The lists are kept per fiber between steps and made again only when an end has moved by half
+  // the reach since (StaticBodies::within; the hits are the same either way, bit for bit), so a
+  // formed sheet does not rebuild them every step.
   void begin_step(const std::vector<rod::Node> &start, double t0, double h) override {
     BodyContactModel::begin_step(start, t0, h);
     const std::size_t n = start.size();
-    cand_.resize(n);
-    const double margin = law_.h_cut;
-    for (std::size_t k = 0; k < n; ++k) {
-      cand_[k].valid = false;
-      if (bodies_.segments().empty() || k + 1 >= n || !start[k].next) continue;
-      const double r = element_reach(start[k], start[k + 1]);
-      bodies_.element_candidates(start[k].x, start[k + 1].x, r, r + margin, r, cand_[k]);
+    cand_.assign(n, nullptr);
+    if (bodies_.segments().empty()) return;
+    const bool by_fiber = offsets_.size() == fibers_.size() + 1 && !fibers_.empty() && offsets_.front() == 0 &&
+                          offsets_.back() == static_cast<int>(n);
+    if (!by_fiber) {  // a solve without begin_cluster: lists of this attempt only
+      own_.resize(n);
+      for (std::size_t k = 0; k + 1 < n; ++k)
+        if (start[k].next) cand_[k] = &list_for(start, k, own_[k], 0.0);
+      return;
+    }
+    for (std::size_t f = 0; f < fibers_.size(); ++f) {
+      const std::size_t o = static_cast<std::size_t>(offsets_[f]), e = static_cast<std::size_t>(offsets_[f + 1]);
+      std::vector<StaticBodies::Candidates> &kept = by_fiber_[fibers_[f]];
+      kept.resize(e - o);
+      for (std::size_t k = o; k + 1 < e; ++k)
+        if (start[k].next) cand_[k] = &list_for(start, k, kept[k - o], kKeepFraction);
     }
   }
 
@@ -868,7 +897,7 @@ class StaticContactModel : public BodyContactModel {
         const rod::Node &b = nodes[k + 1];
         const bool rect = rect_a || rect_section(b);
         const double r = element_reach(a, b);
-        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits, k < cand_.size() ? &cand_[k] : nullptr);
+        const int nh = bodies_.element_hits(a.x, b.x, r, r + margin, hits, k < cand_.size() ? cand_[k] : nullptr);
         for (int q = 0; q < nh; ++q) {
           if (rect) {
             // the gap from the rectangle's extent; its gradient with the contact points sliding
@@ -891,9 +920,26 @@ class StaticContactModel : public BodyContactModel {
     }
   }
 
+  // a kept list is used again while both ends stay within this fraction of its skin
+  static constexpr double kKeepFraction = 0.5;
+
  private:
+  // list c for element k of start, made again unless it still serves (keep: StaticBodies::within's
+  // fraction; 0: always made)
+  StaticBodies::Candidates &list_for(const std::vector<rod::Node> &start, std::size_t k, StaticBodies::Candidates &c,
+                                     double keep) const {
+    const double r = element_reach(start[k], start[k + 1]);
+    const double margin = law_.h_cut;
+    if (!(keep > 0.0 && bodies_.within(c, start[k].x, start[k + 1].x, r, r + margin, keep)))
+      bodies_.element_candidates(start[k].x, start[k + 1].x, r, r + margin, r, c);
+    return c;
+  }
+
   const StaticBodies &bodies_;
-  std::vector<StaticBodies::Candidates> cand_;  // per element (begin_step)
+  std::vector<const StaticBodies::Candidates *> cand_;  // per element of the solve (begin_step)
+  std::vector<StaticBodies::Candidates> own_;            // lists of a solve without begin_cluster
+  std::unordered_map<int, std::vector<StaticBodies::Candidates>> by_fiber_;  // kept lists per fiber id
+  std::vector<int> fibers_, offsets_;                    // of the next solve (begin_cluster)
 };
 
 }  // namespace fiberform::physics
