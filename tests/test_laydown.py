@@ -13,21 +13,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from laydown_scenes import tiny_piece
 
 pytestmark = pytest.mark.system
 
-SCENE = """
+SCENE = f"""
 name: tiny_laydown
 seed: 3
-run: {timestep_s: 1.0e-7, duration_s: 1.0e-3}
-domain: {lo_m: [0.0, 0.0, 0.0], hi_m: [1.0e-3, 1.0e-3, 3.437e-3]}
-fibers: {count: 6, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
-         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}
-fiber_generation: {placement_lo_m: [0.0, 0.0, 2.66e-3], placement_hi_m: [1.0e-3, 1.0e-3, 3.43e-3]}
-fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}
-flow: {delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}
-laydown: {max_time_s: 0.012, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
-          timestep_s: 1.0e-6}
+{tiny_piece(3.43e-3)}laydown: {{max_time_s: 0.012, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
+          timestep_s: 1.0e-6}}
 """
 # Real stiffness and inertia, implicit fibers, yarn contact inside the Newton solve (the defaults).
 

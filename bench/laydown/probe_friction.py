@@ -227,7 +227,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick,
                                                                probe_fields(anderson, tolerance, timestep, landing)))
     fiberdem = build / "bin" / "fiberdem"
-    argv = build_command([str(fiberdem), "-in", "in.probe", "-log", "log.probe"], ranks)
+    program = [str(fiberdem), "-in", "in.probe", "-log", "log.probe"]
+    argv = build_command(program, ranks)
     t0 = time.perf_counter()
     code, user, system = run_counted(argv, folder, folder / "stderr.probe")
     wall = time.perf_counter() - t0
@@ -241,7 +242,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
                            "fiberdem": file_hash(fiberdem)}
     row["build_revision"] = build_revision(build)
     # how the ranks were started (the mpirun options, e.g. --bind-to none; "" without mpirun)
-    prefix = argv[:len(argv) - 5]
+    prefix = argv[:len(argv) - len(program)]
     row["launch"] = " ".join([Path(prefix[0]).name, *prefix[1:]]) if prefix else ""
     row.update({"ranks": ranks, "cpu_s": user + system, "cpu_user_s": user, "cpu_sys_s": system})
     final = folder / FINAL_DUMP

@@ -129,11 +129,12 @@ def _kept_file(out: Path, current: dict[str, Any] | None, sem_factor: float) -> 
 
 @dataclass
 class GroupJob:
-    """One point-section group: its sweep's command line, its scene and its pressure scene (None
-    without the campaign's pressure_press)."""
+    """One point-section group: its sweep's command line, its scene, the sweep's folder and its
+    pressure scene (None without the campaign's pressure_press)."""
     group: str
     cmd: list[str]
     scene: Path
+    sweep_dir: Path
     pressure_scene: Path | None
 
 
@@ -163,7 +164,7 @@ def _run_group(job: GroupJob, seeds: int, build: Path, opts: Any, args: argparse
     if job.pressure_scene is None:
         return out
     emit(f"== {group}-pressure: the second press ({job.pressure_scene}), lay-downs taken over from "
-         f"{Path(f'{load_scene(job.scene).output_dir}-sweep')}")
+         f"{job.sweep_dir}")
     try:
         pr = cp.run_pressure_sweep(job.scene, job.pressure_scene, seeds, build, emit, opts, jobs=args.jobs,
                                    resume=args.resume)
@@ -173,7 +174,7 @@ def _run_group(job: GroupJob, seeds: int, build: Path, opts: Any, args: argparse
     if pr.waiting:
         out.pending[f"{group}-pressure"] = pr.waiting
         emit(f"== {group}-pressure: {len(pr.waiting)} seed(s) wait for their lay-down and permeability in "
-             f"{load_scene(job.scene).output_dir}-sweep (not laid down again)"
+             f"{job.sweep_dir} (not laid down again)"
              + (": run this command again once they are done" if args.submit else ""))
     if pr.failed:
         out.failures[f"{group}-pressure"] = (f"failed: {', '.join(pr.failed)} "
@@ -317,7 +318,8 @@ def _main() -> int:
                 cmd += ["--jobs", str(args.jobs)]
             if args.resume:
                 cmd.append("--resume")
-            jobs.append(GroupJob(group, cmd, scene_path, pressure_path if c.pressure_press is not None else None))
+            jobs.append(GroupJob(group, cmd, scene_path, groups[group],
+                                 pressure_path if c.pressure_press is not None else None))
     if args.points_at_once == 1 or len(jobs) <= 1:
         outcomes = [_run_group(job, seeds, build, opts, args, print_line, None) for job in jobs]
     else:
