@@ -151,6 +151,31 @@ def test_local_mpi_ranks_are_not_bound_to_cores() -> None:
     assert proc.stdout.split("\n")[:2] == [str(everything)] * 2, proc.stdout
 
 
+@pytest.mark.skipif(shutil.which("mpirun") is None or shutil.which("ompi_info") is None
+                    or (os.cpu_count() or 1) < 2, reason="mpirun, ompi_info, 2 cores")
+def test_waiting_ranks_yield_their_core(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every local run's ranks get Open MPI's yield-when-idle (two 2-rank jobs side by side on 2
+    cores otherwise poll each other's cores away: 0.33x the work of one job, docs/bench/laydown.md
+    "Two points side by side"). Open MPI itself, started through mpirun on 2 ranks, reports the
+    parameter's value and that it came from the environment (a misspelt name would be ignored);
+    a value the user set is kept."""
+    import subprocess
+
+    show = ["ompi_info", "--param", "mpi", "all", "--level", "9", "--parsable"]
+
+    def reported(env: dict[str, str]) -> list[str]:
+        proc = subprocess.run(build_command(show, 2), env=env, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return [ln for ln in proc.stdout.splitlines() if ln.startswith("mca:mpi:base:param:mpi_yield_when_idle:")
+                and ln.split(":")[-2] in ("value", "source")]
+
+    monkeypatch.delenv("OMPI_MCA_mpi_yield_when_idle", raising=False)
+    assert reported(build_env()) == ["mca:mpi:base:param:mpi_yield_when_idle:value:true",
+                                     "mca:mpi:base:param:mpi_yield_when_idle:source:environment"] * 2
+    monkeypatch.setenv("OMPI_MCA_mpi_yield_when_idle", "0")
+    assert reported(build_env())[0] == "mca:mpi:base:param:mpi_yield_when_idle:value:false"
+
+
 @pytest.mark.skipif(
     shutil.which("mpirun") is None or (os.cpu_count() or 1) < 2, reason="mpirun, 2 cores"
 )

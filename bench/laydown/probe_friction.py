@@ -41,7 +41,8 @@ fibers starting to pile up), made by
 Every probe ends with a dump of the final state (``final.dump``: every node's id, x, y, z, vx, vy,
 vz with ``%.17g``, sorted by id) and reports its sha256 (``final_state``), the CPU time of the
 whole run (``cpu_s``: user + sys of fiberdem, or of mpirun and all its ranks, from os.wait4) and the
-build (``launch``: the mpirun options, empty on one rank; ``build``, ``fiberdem``: the sha256 of its
+build (``launch``: the mpirun options, empty on one rank; ``mpi_env``: Open MPI's ``OMPI_MCA_*``
+settings the ranks got, e.g. yield-when-idle; ``build``, ``fiberdem``: the sha256 of its
 bin/fiberdem, ``build_revision``: the commit its
 binaries come from, the build folder's ``REVISION`` file that every build writes,
 cmake/WriteRevision.cmake; ``unknown`` for a build folder made before that file existed).
@@ -244,6 +245,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     # how the ranks were started (the mpirun options, e.g. --bind-to none; "" without mpirun)
     prefix = argv[:len(argv) - len(program)]
     row["launch"] = " ".join([Path(prefix[0]).name, *prefix[1:]]) if prefix else ""
+    # and Open MPI's settings from the environment (e.g. yield-when-idle, fiberform.runner.MPI_ENVIRONMENT)
+    row["mpi_env"] = {k: v for k, v in sorted(build_env().items()) if k.startswith("OMPI_MCA_")} if prefix else {}
     row.update({"ranks": ranks, "cpu_s": user + system, "cpu_user_s": user, "cpu_sys_s": system})
     final = folder / FINAL_DUMP
     if final.is_file():

@@ -5,8 +5,9 @@
 * ``ranks > 1`` prefixes ``mpirun -np N``; more ranks than cores is refused unless the caller
   passes ``oversubscribe=True`` (busy-waiting oversubscribed ranks double the run time).
 * The environment gets ``OMPI_ALLOW_RUN_AS_ROOT=1`` and ``OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1`` (so
-  mpirun works as root without ``--allow-run-as-root`` on the command line) and
-  ``WM_PROJECT_DIR=/usr/share/openfoam`` unless already set (every OpenFOAM binary needs it).
+  mpirun works as root without ``--allow-run-as-root`` on the command line),
+  ``WM_PROJECT_DIR=/usr/share/openfoam`` (every OpenFOAM binary needs it) and
+  ``OMPI_MCA_mpi_yield_when_idle=1`` (:data:`MPI_ENVIRONMENT`), each unless already set.
 * Standard output and error are streamed, merged, to the log file (``log.<tool>`` in the stage
   folder, as OpenFOAM's ``runApplication`` does).
 * On a terminal, a rich progress bar shows the fraction reported by an optional ``progress``
@@ -43,6 +44,8 @@ from rich.progress import (
 from .errors import ConfigError, RunError
 
 __all__ = [
+    "MPIRUN_OPTIONS",
+    "MPI_ENVIRONMENT",
     "OPENFOAM_PROJECT_DIR",
     "Program",
     "ProgressParser",
@@ -146,12 +149,27 @@ def mpmd_command(parts: Sequence[tuple[Sequence[str], int]], oversubscribe: bool
     return [mpirun, *MPIRUN_OPTIONS, *(["--oversubscribe"] if total > _cores() else []), *out]
 
 
+#: Open MPI settings of every local run, unless the caller's environment sets them: a rank that
+#: waits for a message yields its core (``sched_yield``) instead of polling flat out. Open MPI only
+#: turns this on by itself when one ``mpirun`` has more ranks than cores; two 2-rank jobs side by
+#: side on 2 cores (sweep --jobs, campaign --points-at-once) are not oversubscribed in its eyes,
+#: and each job's waiting ranks then took the cores from the ranks they wait for. Measured on the
+#: formed S3 sheet with the campaign's solver settings (docs/bench/laydown.md "Two points side by
+#: side"): two 2-rank probes at once did 0.33 times the work of one alone polling, 1.71 times
+#: yielding; one job alone the same within noise. Batch scripts (fiberform.executors) do not set
+#: it: there the scheduler gives each job its own cores.
+MPI_ENVIRONMENT = {"OMPI_MCA_mpi_yield_when_idle": "1"}
+
+
 def build_env(env_extra: Mapping[str, str] | None = None) -> dict[str, str]:
-    """The environment of a run: ours plus Open MPI's root permission and WM_PROJECT_DIR."""
+    """The environment of a run: ours plus Open MPI's root permission, :data:`MPI_ENVIRONMENT`
+    (unless set) and WM_PROJECT_DIR."""
     env = dict(os.environ)
     env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
     env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
     env.setdefault("WM_PROJECT_DIR", OPENFOAM_PROJECT_DIR)
+    for key, value in MPI_ENVIRONMENT.items():
+        env.setdefault(key, value)
     for key, value in (env_extra or {}).items():
         if not isinstance(key, str) or not isinstance(value, str) or "=" in key or not key:
             raise ConfigError(f"bad environment entry {key!r}={value!r}")
