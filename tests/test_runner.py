@@ -176,6 +176,24 @@ def test_waiting_ranks_yield_their_core(monkeypatch: pytest.MonkeyPatch) -> None
     assert reported(build_env())[0] == "mca:mpi:base:param:mpi_yield_when_idle:value:false"
 
 
+@pytest.mark.skipif(not Path("/proc/self/autogroup").is_file(), reason="no scheduler autogroups")
+def test_programs_keep_our_niceness(tmp_path: Path) -> None:
+    """A program run through the runner leads its own session, hence its own scheduler autogroup,
+    which would otherwise share the cores at nice 0 whatever ``nice`` the user started fiberform
+    with: under ``nice -n 7`` the program's autogroup reports nice 7 (the program reads it after a
+    second, the runner writes it right after the start); at niceness 0 nothing changes."""
+    import subprocess
+    import sys
+
+    show = "from pathlib import Path; from fiberform.runner import run; " \
+           "run(['/bin/sh', '-c', 'sleep 1; cat /proc/self/autogroup'], Path('log.n'))"
+    for nice, expected in ((7, "nice 7"), (0, "nice 0")):
+        proc = subprocess.run(["nice", "-n", str(nice), sys.executable, "-c", show], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert (tmp_path / "log.n").read_text().split()[-2:] == expected.split()
+
+
 @pytest.mark.skipif(
     shutil.which("mpirun") is None or (os.cpu_count() or 1) < 2, reason="mpirun, 2 cores"
 )
