@@ -91,7 +91,7 @@ def test_case_point_is_the_shipped_case_scene(setup: tuple[cp.Campaign, list[cp.
     p = next(p for p in pts if p.name == case)
     shipped = read_scene_yaml((THESIS / f"case-{case}-{section}.yaml").read_text())
     # the scenes' own fiber contact (the campaign's fiber_contact override: test_fiber_contact_override)
-    own = c.model_copy(update={"fiber_contact": None, "solver": None})
+    own = c.model_copy(update={"fiber_contact": None, "solver": None, "permeability": None})
     data = cp.point_scene(own, p, section, THESIS, Path("runs/x"))  # type: ignore[arg-type]
     press = data.pop("press")
     for d in (data, shipped):
@@ -112,6 +112,8 @@ def test_every_point_scene_is_valid(setup: tuple[cp.Campaign, list[cp.Sheet], li
             assert c.solver is not None
             assert (sc.laydown.newton_tolerance, sc.laydown.anderson_depth) == (
                 c.solver.newton_tolerance, c.solver.anderson_depth) == (1.0e-5, 3)
+            assert sc.permeability is not None and c.permeability is not None
+            assert sc.permeability.convergence_tolerance == c.permeability.convergence_tolerance == 1.0e-2
             assert sc.fibers.target_mass_kg == pytest.approx(p.mass_kg, rel=1e-6)
             slab = sc.fiber_generation.placement_hi_m[2] - sc.fiber_generation.placement_lo_m[2]
             # placement heights are written with 7 significant digits (1e-9 m at 3 mm)
@@ -701,6 +703,34 @@ def test_pressure_presses_wait_for_their_laydown(tmp_path: Path, monkeypatch: py
     assert pr.sweep_dir == Path("runs/A-circular-pressure-sweep") and (pr.sweep_dir / "sweep.json").is_file()
     assert not (pr.sweep_dir / "jobs").exists() and not list(pr.sweep_dir.glob("campaign_*/*"))
     assert any("not submitted" in line for line in lines)
+
+
+def test_permeability_settings_reach_every_point(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]],
+                                                tmp_path: Path) -> None:
+    """campaign.permeability.convergence_tolerance reaches the point scene's and its pressure
+    scene's permeability section and the solve's stop criterion (the function object's tolerance
+    in the case setup); left out, the case scene's stays; out of range, it is refused naming the
+    field."""
+    from fiberform.stages.permeability import PermeabilityGeometry, case_setup
+
+    c, _, pts = setup
+    case = read_scene_yaml((THESIS / c.base["circular"]).read_text())
+    geo = PermeabilityGeometry(1.0e-3, 1.0e-3, 2.0e-3, 2.6e-3, 20.0e-6, ())
+    for tol in (1.0e-2, 2.5e-2):
+        camp = c.model_copy(update={"permeability": cp.CampaignPermeability(convergence_tolerance=tol)})
+        data = cp.point_scene(camp, pts[0], "circular", THESIS, Path("runs/x"))
+        for scene in (data, cp.pressure_scene(camp, data)):
+            perm = parse_scene(scene, "p").permeability
+            assert perm is not None and perm.convergence_tolerance == tol
+            assert case_setup(perm, geo).stop_tolerance == tol
+    none = cp.point_scene(c.model_copy(update={"permeability": None}), pts[0], "circular", THESIS, Path("runs/x"))
+    assert none["permeability"]["convergence_tolerance"] == case["permeability"]["convergence_tolerance"]
+    assert c.permeability is not None and c.permeability.convergence_tolerance == 1.0e-2  # the shipped campaign's
+    camp_file = tmp_path / "campaign.yaml"
+    camp_file.write_text((THESIS / "campaign.yaml").read_text().replace(
+        "permeability: {convergence_tolerance: 1.0e-2}", "permeability: {convergence_tolerance: 0.9}"))
+    with pytest.raises(cp.ConfigError, match="convergence_tolerance"):
+        cp.load_campaign(camp_file)
 
 
 def test_solver_settings_reach_every_point(setup: tuple[cp.Campaign, list[cp.Sheet], list[cp.Point]],

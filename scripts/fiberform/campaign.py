@@ -57,7 +57,7 @@ if TYPE_CHECKING:
     from .executors import BatchOptions
     from .sweep import Variant
 
-__all__ = ["Campaign", "CampaignSolver", "Kept", "Point", "PressureSweep", "SemPoint", "Sheet", "kept_results", "load_campaign",
+__all__ = ["Campaign", "CampaignPermeability", "CampaignSolver", "Kept", "Point", "PressureSweep", "SemPoint", "Sheet", "kept_results", "load_campaign",
            "merge_pressure", "points", "point_scene", "pressure_scene", "read_experiments", "row_sem_mass",
            "run_pressure_sweep", "sem_factor", "sem_interp", "sem_support", "sem_value", "summarise", "sheet_ratios",
            "use_fiber_contact"]
@@ -98,6 +98,15 @@ class CampaignSolver(_Strict):
     anderson_depth: int | None = Field(default=None, ge=0, le=8)
 
 
+class CampaignPermeability(_Strict):
+    """Convergence of the permeability solves that the campaign sets in every point scene
+    (``permeability.convergence_tolerance``; absent: the case scene's). Not physics: when the
+    outflow window counts as converged (docs/validation/table41.md "Permeability convergence").
+    Bounds as the scene's field."""
+
+    convergence_tolerance: float | None = Field(default=None, gt=0.0, le=0.5)
+
+
 class Reduced(_Strict):
     points: list[str] = Field(min_length=1)
     seeds: int = Field(ge=1, le=100)
@@ -123,6 +132,7 @@ class Campaign(_Strict):
     sem_mapping: SemMapping
     fiber_contact: Literal["averaged", "newton"] | None = None
     solver: CampaignSolver | None = None
+    permeability: CampaignPermeability | None = None
     press: CampaignPress
     pressure_press: CampaignPressurePress | None = None
     reduced: Reduced
@@ -230,7 +240,8 @@ def use_fiber_contact(data: dict[str, Any], mode: str) -> None:
 def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, out_root: Path) -> dict[str, Any]:
     """The scene of ``point`` with ``section``: the case-A scene of the section with the mass, the
     placement slab and the flow box scaled (as the shipped case scenes scale them), output under
-    ``out_root``, the campaign's fiber contact and solver settings and its press section. Validated (SceneError names the problem)."""
+    ``out_root``, the campaign's fiber contact, solver and permeability settings and its press
+    section. Validated (SceneError names the problem)."""
     data: dict[str, Any] = read_scene_yaml((thesis_dir / c.base[section]).read_text())
     k = point.mass_kg / c.M_A_kg
     slab = c.slab_per_M_A_m[section] * k
@@ -245,6 +256,8 @@ def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, o
         use_fiber_contact(data, c.fiber_contact)
     if c.solver is not None:
         data["laydown"].update(c.solver.model_dump(exclude_none=True))
+    if c.permeability is not None:
+        data["permeability"].update(c.permeability.model_dump(exclude_none=True))
     p = c.press
     data["press"] = {"mode": "velocity", "target_thickness_m": float(f"{point.press_target_m:.6e}"),
                      "plate_speed_m_s": p.plate_speed_m_s, "hold_time_s": p.hold_time_s,
