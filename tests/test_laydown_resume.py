@@ -102,6 +102,12 @@ def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], 
         start = int(h["run"].attrs["resumed_from_step"])
         steps = h["snapshots/step"][...]
     assert 1000 <= start <= 3000 and start % 1000 == 0, start  # from a complete restart file
+    with h5py.File(work / "runs/a/laydown/laydown.h5", "r") as h:
+        run, elapsed = dict(h["run"].attrs), float(h.attrs["elapsed_s"])
+    # the killed part's time up to the restart step counts (wall.earlier.json)
+    assert run["wall_time_earlier_parts_s"] > 0.0, run
+    assert run["wall_time_s"] == pytest.approx(run["wall_time_this_part_s"] + run["wall_time_earlier_parts_s"])
+    assert elapsed > run["wall_time_earlier_parts_s"]
     assert list(steps) == sorted(set(steps.tolist())), "snapshots repeated or out of order"
     assert steps[-1] == 6000
     x, ids = _sheet(work / "runs/a/laydown/laydown.h5")
@@ -172,6 +178,41 @@ def test_resume_after_a_removal_lists_only_the_fibers_left(tmp_path: Path) -> No
     rows = [ln.split() for ln in (work / "fibers.nodes").read_text().splitlines() if not ln.startswith("#")]
     assert sorted({int(r[1]) for r in rows}) == [1, 3, 4]
     assert len(rows) == 6
+
+
+def test_resumed_runs_count_the_time_of_the_parts_before(tmp_path: Path) -> None:
+    """wall.earlier.json: at each resume the killed part's Loop times up to the restart step are
+    added to the parts before (its work after the restart step is redone: not counted); a resume
+    back behind a step already counted makes the earlier time unknown; a run from step 0 has
+    none."""
+    import json
+
+    from fiberform.stages.laydown import LOG_NAME, PREPARED_STEP, earlier_wall, prepare_resume
+
+    def log(*runs: tuple[int, int, float]) -> str:
+        return "".join(f"Step Atoms\n {a} 8\n {b} 8\nLoop time of {t} on 2 procs for {b - a} steps with 8 atoms\n"
+                       for a, b, t in runs)
+
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "traj.dump").write_text("")
+    (work / PREPARED_STEP).write_text(json.dumps({"resume_step": None}))
+    assert earlier_wall(work) == 0.0
+    # the first part: runs to 1000, 2000, 3000 (restart file at 2000), killed during the 4th
+    (work / LOG_NAME).write_text(log((0, 1000, 10.0), (1000, 2000, 20.0), (2000, 3000, 40.0)) + "Step Atoms\n 3000 8\n")
+    prepare_resume(work, 2000)
+    (work / PREPARED_STEP).write_text(json.dumps({"resume_step": 2000}))
+    assert earlier_wall(work) == 30.0
+    # the second part from 2000: runs to 3000 and 4000, killed; resumed from its 4000 restart
+    (work / LOG_NAME).write_text(log((2000, 3000, 5.0), (3000, 4000, 7.0), (4000, 5000, 9.0)))
+    prepare_resume(work, 4000)
+    (work / PREPARED_STEP).write_text(json.dumps({"resume_step": 4000}))
+    assert earlier_wall(work) == 42.0
+    # back behind 4000: the count would include redone work
+    (work / LOG_NAME).write_text(log((4000, 4500, 1.0)))
+    prepare_resume(work, 3000)
+    (work / PREPARED_STEP).write_text(json.dumps({"resume_step": 3000}))
+    assert earlier_wall(work) is None
 
 
 def test_resume_recovers_a_removal_the_log_lost(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from .errors import StageError
 
-__all__ = ["Frame", "read_dump", "thermo_rows", "total_wall_time"]
+__all__ = ["Frame", "read_dump", "run_loop_times", "thermo_rows", "total_wall_time"]
 
 
 def total_wall_time(log: str) -> float:
@@ -26,6 +26,34 @@ def total_wall_time(log: str) -> float:
     except ValueError:
         return 0.0
     return float(h * 3600 + m * 60 + s)
+
+
+def run_loop_times(log: str) -> list[tuple[int, float]]:
+    """Each finished ``run`` of a LIGGGHTS log as (the step it ended at: the last row of its thermo
+    table, which LIGGGHTS prints at a run's last step; its ``Loop time of T on ...`` in seconds). A
+    run without a numeric thermo row, or a killed one (no Loop time line), is left out."""
+    out: list[tuple[int, float]] = []
+    inside, last = False, None
+    for line in log.splitlines():
+        words = line.split()
+        if words[:1] == ["Step"]:
+            inside, last = True, None
+            continue
+        if inside and line.startswith("Loop time of "):
+            inside = False
+            try:
+                seconds = float(words[3])
+            except (IndexError, ValueError):
+                continue
+            if last is not None:
+                out.append((last, seconds))
+            continue
+        if inside and words:
+            try:
+                last = int([float(w) for w in words][0])  # a numeric row (warnings are skipped)
+            except ValueError:
+                pass
+    return out
 
 
 def thermo_rows(log: str) -> list[list[float]]:

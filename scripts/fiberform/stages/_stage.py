@@ -15,7 +15,8 @@ is the stage's HDF5 file, which is written last and marks completion. A run
 
 While it runs, ``<stage folder>/stage-state.json`` says ``running`` (pid, host, start); a failed or
 interrupted run leaves it saying ``failed`` with the error; a successful run removes it. The HDF5
-file records the stage's wall time (``elapsed_s``). ``fiberform status`` reads both
+file records the stage's wall time (``elapsed_s``; a resumed stage adds the time of the parts
+before it, :meth:`Stage.earlier_elapsed`, also stored as ``elapsed_earlier_parts_s``). ``fiberform status`` reads both
 (:mod:`fiberform.pipeline`). A stage declares the upstream products it reads in :meth:`Stage.needs`;
 the pipeline order follows from those declarations.
 
@@ -289,6 +290,11 @@ class Stage(abc.ABC):
         prepared.unlink(missing_ok=True)
         return Outcome(self.name, False, self.product_paths(ctx), time.monotonic() - start, "done")
 
+    def earlier_elapsed(self, ctx: StageContext) -> float:
+        """Seconds spent before this run on the work it continues (a resumed stage: the killed
+        parts up to the point it resumed from), added to the product's ``elapsed_s``; 0 here."""
+        return 0.0
+
     def _split_only(self) -> None:
         if not self.splits:
             raise ConfigError(f"stage {self.name} runs in one step (`fiberform {self.name} SCENE`): it is not "
@@ -323,7 +329,10 @@ class Stage(abc.ABC):
             with h5py.File(tmp[paths[0].name], "w") as h5:
                 write_provenance(h5, self.name, ctx.scene, hashes, ctx.options, ctx.build_dir)
                 work(h5, tmp)
-                h5.attrs["elapsed_s"] = time.monotonic() - start
+                earlier = self.earlier_elapsed(ctx)
+                h5.attrs["elapsed_s"] = time.monotonic() - start + earlier
+                if earlier > 0.0:
+                    h5.attrs["elapsed_earlier_parts_s"] = earlier
             for p in paths[1:]:
                 tmp[p.name].replace(p)
             tmp[paths[0].name].replace(paths[0])

@@ -53,7 +53,7 @@ from ..fiber_sheet import (
     write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
 )
 from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_file_token
-from ..liggghts_log import dump_frame, read_dump, total_wall_time
+from ..liggghts_log import dump_frame, read_dump, run_loop_times, total_wall_time
 from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
 from ..provenance import atomic_write_text, file_hash, write_dataset
@@ -73,6 +73,8 @@ RESTART_STEM, RESTART_EXT = "laydown", "restart"  # restart files laydown.<step>
 _RESTART = re.compile(r"laydown\.(\d+)\.restart")
 _SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
 EARLIER_LOG, RESUME_STATE = "log.earlier", "resume.json"
+#: the fiberdem time of the parts before a resume, up to the restart step it continued from
+EARLIER_WALL = "wall.earlier.json"
 #: Written by prepare: the step the run starts from (null: a fresh run), read by collect.
 PREPARED_STEP = "prepared-step.json"
 FLUID_CASE = "fluid"  # the coupled fluid's OpenFOAM case in the working folder (two_way)
@@ -371,6 +373,11 @@ class Laydown(Stage):
             resume_fluid(work, scene, int(resume_step))
         atomic_write_text(work / PREPARED_STEP, json.dumps({"resume_step": resume_step}) + "\n")
 
+    def earlier_elapsed(self, ctx: StageContext) -> float:
+        """A resumed lay-down: fiberdem's time in the parts before it, up to the restart step it
+        continued from (EARLIER_WALL; 0 when not known)."""
+        return earlier_wall(self.stage_dir(ctx) / "work") or 0.0
+
     def _superficial_velocity(self, ctx: StageContext) -> float:
         with h5py.File(ctx.scene.output_path / FLOW_H5, "r") as fh:
             return float(fh["flow_rate/superficial_velocity"][()])
@@ -406,7 +413,10 @@ class Laydown(Stage):
         u_s = self._superficial_velocity(ctx)
         v_settle = settle_speed(scene, u_s)
         key = self.log_key(ctx, work / LOG_NAME)
-        wall = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
+        wall_part = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
+        # a resumed run: the parts before it, to the restart step it continued from, count too
+        wall_before = earlier_wall(work)
+        wall = wall_part + (wall_before or 0.0)
         earlier = work / EARLIER_LOG
         log = ((earlier.read_text(errors="replace") if earlier.is_file() else "")
                + (work / LOG_NAME).read_text(errors="replace"))
@@ -504,7 +514,9 @@ class Laydown(Stage):
             "steps": int(steps_done), "simulated_time_s": steps_done * ld.timestep_s,
             "settled": settled, "settle_speed_m_s": v_settle, "superficial_velocity_m_s": u_s,
             "settle_checks": ld.settle_checks, "settle_measure": ld.settle_measure,
-            "settle_mass_fraction": ld.settle_mass_fraction, "wall_time_s": wall, "steps_per_check": steps_per_check,
+            "settle_mass_fraction": ld.settle_mass_fraction, "wall_time_s": wall, "wall_time_this_part_s": wall_part,
+            "wall_time_earlier_parts_s": math.nan if wall_before is None else wall_before,
+            "steps_per_check": steps_per_check,
             "removal_height_m": removal_height(scene), "fabric_top_m": fabric_top,
             "sheet_thickness_m": thickness, "sheet_thickness_above_fabric_m": above,
             "min_element_clearance_m": float(clearances.min()) if len(clearances) else math.inf,
@@ -615,8 +627,10 @@ class Laydown(Stage):
                f"the neighbouring images; positions above are unwrapped, `/run` lateral_period_m)"]
               if period is not None else []),
             f"- fiberdem wall time: {wall:.1f} s on {ld.ranks} rank(s)"
-            + (f" (this part: resumed from the restart file of step {resume_step})"
-               if resume_step is not None else ""), "",
+            + ("" if resume_step is None else
+               f" ({wall_part:.1f} s in this part, resumed from the restart file of step {resume_step}, "
+               + (f"and {wall_before:.1f} s in the parts before, their LIGGGHTS loop times up to that step)"
+                  if wall_before is not None else "the parts before it not known: this part only)")), "",
             *drain_lines, "",
             "Approximations:", "", *[f"- {a}" for a in approximations(scene)], "",
             f"Pictures: `{PNG_NAME}`; ParaView: `{VTU_NAME}`; data: `{H5_NAME}`; log: "
@@ -783,10 +797,44 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
                                                   fibers_in_nodes(generated_nodes), "\n".join(kept))]
     keep = next((pos for s, pos in snapshots if s >= step), len(text))
     atomic_write_text(earlier, "".join(line + "\n" for line in kept))
+    record_earlier_wall(work, step)
     atomic_write_text(dump, text[:keep])
     for s in restart_steps(work):
         if s > step:
             (work / f"{RESTART_STEM}.{s}.{RESTART_EXT}").unlink()
+
+
+def record_earlier_wall(work: Path, step: int) -> None:
+    """EARLIER_WALL: the fiberdem time spent on the way to the restart step ``step`` a resume
+    continues from: the Loop times of the killed part's runs that ended at or before ``step`` (its
+    work after the restart step is redone, so not counted) plus what EARLIER_WALL said of the parts
+    before it. ``None`` when a resume goes back behind the step an earlier resume counted to (that
+    count would include work now redone)."""
+    path = work / EARLIER_WALL
+    prev: dict[str, Any] = json.loads(path.read_text()) if path.is_file() else {"up_to_step": 0, "wall_s": 0.0}
+    log = work / LOG_NAME
+    runs = run_loop_times(log.read_text(errors="replace")) if log.is_file() else []
+    if prev["wall_s"] is None or int(prev["up_to_step"]) > step:
+        wall = None
+    else:
+        wall = float(prev["wall_s"]) + sum(t for end, t in runs if int(prev["up_to_step"]) < end <= step)
+    atomic_write_text(path, json.dumps({"up_to_step": step, "wall_s": wall}) + "\n")
+
+
+def earlier_wall(work: Path) -> float | None:
+    """The fiberdem time of the parts before this resumed run (EARLIER_WALL), 0 for a run from step
+    0, ``None`` when unknown (:func:`record_earlier_wall`)."""
+    try:
+        resumed = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
+    except (OSError, ValueError, KeyError):
+        return 0.0
+    if resumed is None:
+        return 0.0
+    path = work / EARLIER_WALL
+    if not path.is_file():
+        return None  # a run resumed before fiberform recorded it
+    rec = json.loads(path.read_text())
+    return None if rec["wall_s"] is None or int(rec["up_to_step"]) != int(resumed) else float(rec["wall_s"])
 
 
 def snapshot_fibers(text: str, pos: int) -> set[int]:
