@@ -28,31 +28,46 @@ def total_wall_time(log: str) -> float:
     return float(h * 3600 + m * 60 + s)
 
 
+def _thermo_tables(log: str) -> list[tuple[list[list[float]], str | None]]:
+    """Each thermo table of a LIGGGHTS log: its numeric rows (lines that are not all numbers are
+    skipped) and the ``Loop time`` line that ended it (None: the run was cut off, or another
+    header followed). A table starts after a header line beginning with ``Step``."""
+    tables: list[tuple[list[list[float]], str | None]] = []
+    rows: list[list[float]] | None = None
+    for line in log.splitlines():
+        words = line.split()
+        if words[:1] == ["Step"]:
+            if rows is not None:
+                tables.append((rows, None))
+            rows = []
+            continue
+        if rows is not None and line.startswith("Loop time"):
+            tables.append((rows, line))
+            rows = None
+            continue
+        if rows is not None:
+            try:
+                rows.append([float(w) for w in words])
+            except ValueError:
+                pass
+    if rows is not None:
+        tables.append((rows, None))
+    return tables
+
+
 def run_loop_times(log: str) -> list[tuple[int, float]]:
     """Each finished ``run`` of a LIGGGHTS log as (the step it ended at: the last row of its thermo
     table, which LIGGGHTS prints at a run's last step; its ``Loop time of T on ...`` in seconds). A
     run without a numeric thermo row, or a killed one (no Loop time line), is left out."""
     out: list[tuple[int, float]] = []
-    inside, last = False, None
-    for line in log.splitlines():
-        words = line.split()
-        if words[:1] == ["Step"]:
-            inside, last = True, None
+    for rows, loop in _thermo_tables(log):
+        steps = [r[0] for r in rows if r]
+        if loop is None or not steps:
             continue
-        if inside and line.startswith("Loop time of "):
-            inside = False
-            try:
-                seconds = float(words[3])
-            except (IndexError, ValueError):
-                continue
-            if last is not None:
-                out.append((last, seconds))
-            continue
-        if inside and words:
-            try:
-                last = int([float(w) for w in words][0])  # a numeric row (warnings are skipped)
-            except ValueError:
-                pass
+        try:
+            out.append((int(steps[-1]), float(loop.split()[3])))
+        except (IndexError, ValueError):
+            pass
     return out
 
 
@@ -63,22 +78,7 @@ def thermo_rows(log: str) -> list[list[float]]:
     ``thermo_style custom step time ...``) and ends at ``Loop time``. Lines inside a table that
     are not all numbers (warnings, memory lines) are skipped. LIGGGHTS abbreviates long column
     names in the header, so callers name the columns themselves from their input script."""
-    rows: list[list[float]] = []
-    inside = False
-    for line in log.splitlines():
-        words = line.split()
-        if words[:1] == ["Step"]:
-            inside = True
-            continue
-        if inside and line.startswith("Loop time"):
-            inside = False
-            continue
-        if inside:
-            try:
-                rows.append([float(w) for w in words])
-            except ValueError:
-                pass
-    return rows
+    return [row for rows, _ in _thermo_tables(log) for row in rows]
 
 
 @dataclass(frozen=True)

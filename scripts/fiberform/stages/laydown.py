@@ -787,8 +787,8 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
     earlier = work / EARLIER_LOG
     old = (earlier.read_text(errors="replace") if earlier.is_file() else "")
     log = work / LOG_NAME
-    if log.is_file():
-        old += log.read_text(errors="replace")
+    current = log.read_text(errors="replace") if log.is_file() else ""
+    old += current
     kept = [m.group(0) for m in _REMOVED.finditer(old) if int(m.group(1)) <= step]
     if generated_nodes is not None:
         kept += [f"fix fiber/remove: step {s} removed fiber(s) "
@@ -797,23 +797,22 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
                                                   fibers_in_nodes(generated_nodes), "\n".join(kept))]
     keep = next((pos for s, pos in snapshots if s >= step), len(text))
     atomic_write_text(earlier, "".join(line + "\n" for line in kept))
-    record_earlier_wall(work, step)
+    record_earlier_wall(work, step, current)
     atomic_write_text(dump, text[:keep])
     for s in restart_steps(work):
         if s > step:
             (work / f"{RESTART_STEM}.{s}.{RESTART_EXT}").unlink()
 
 
-def record_earlier_wall(work: Path, step: int) -> None:
+def record_earlier_wall(work: Path, step: int, log: str) -> None:
     """EARLIER_WALL: the fiberdem time spent on the way to the restart step ``step`` a resume
-    continues from: the Loop times of the killed part's runs that ended at or before ``step`` (its
-    work after the restart step is redone, so not counted) plus what EARLIER_WALL said of the parts
-    before it. ``None`` when a resume goes back behind the step an earlier resume counted to (that
-    count would include work now redone)."""
+    continues from: the Loop times of the killed part's runs (its log text ``log``) that ended at or
+    before ``step`` (its work after the restart step is redone, so not counted) plus what
+    EARLIER_WALL said of the parts before it. ``None`` when a resume goes back behind the step an
+    earlier resume counted to (that count would include work now redone)."""
     path = work / EARLIER_WALL
     prev: dict[str, Any] = json.loads(path.read_text()) if path.is_file() else {"up_to_step": 0, "wall_s": 0.0}
-    log = work / LOG_NAME
-    runs = run_loop_times(log.read_text(errors="replace")) if log.is_file() else []
+    runs = run_loop_times(log)
     if prev["wall_s"] is None or int(prev["up_to_step"]) > step:
         wall = None
     else:
