@@ -282,6 +282,44 @@ void test_rotation_gradient() {
   expect(!g.has_rot, "no analytic rotation columns with damping");
 }
 
+// the matrix forms the gradients are built from (rotation_matrix, so3_matrix, skew, outer, the
+// diagonal products) against the vector operations they replace, and the slopes from a relative
+// rotation's sin/cos(f/2) against the slopes from std::sin/std::cos, on both sides of the series
+void test_matrix_forms() {
+  for (int t = 0; t < 50; ++t) {
+    const Quat q = rquat();
+    const Vec3 v = rvec(2.0), a = rvec(1.5), th = rvec(1.7);
+    const Mat3 R = rotation_matrix(q);
+    expect(norm(R * v - qrot(q, v)) < 1e-14 * norm(v), "rotation_matrix(q) v = qrot(q, v)");
+    expect(norm(transpose(R) * v - qrot_t(q, v)) < 1e-14 * norm(v), "R^T v = qrot_t(q, v)");
+    const Mat3 S = so3_matrix(th, 0.3, -0.7);
+    expect(norm(S * v - apply_so3(th, 0.3, -0.7, v)) < 1e-14 * (1 + dot(th, th)) * norm(v), "so3_matrix = apply_so3");
+    expect(norm(skew(a) * v - cross(a, v)) < 1e-15 * norm(a) * norm(v), "skew(a) v = a x v");
+    expect(norm(outer(a, th) * v - dot(th, v) * a) < 1e-15 * norm(a) * norm(th) * norm(v), "outer(a, b) v = (b.v) a");
+    const Mat3 M = so3_matrix(a, 0.2, 0.1);
+    expect(norm(diag_times(th, M) * v - hadamard(th, M * v)) < 1e-14 * norm(th) * norm(v) * (1 + dot(a, a)),
+           "diag(d) M v");
+    expect(norm(times_diag(M, th) * v - M * hadamard(th, v)) < 1e-14 * norm(th) * norm(v) * (1 + dot(a, a)),
+           "M diag(d) v");
+    expect(norm((R * M) * v - R * (M * v)) < 1e-14 * norm(v) * (1 + dot(a, a)), "matrix product");
+  }
+  double worst = 0;
+  for (double f : {1e-6, 1e-3, 0.049, 0.0500001, 0.2, 1.0, 2.0, 3.0, 3.14}) {
+    const Quat qA = rquat();
+    const Vec3 n = (1.0 / norm(rvec(1.0) + Vec3{0.1, 0, 0})) * (rvec(1.0) + Vec3{0.1, 0, 0});
+    const RelativeRotation r = relative_rotation(qA, qmul(qA, qexp(f * (1.0 / norm(n)) * n)));
+    const double g = norm(r.th);
+    const JacobianCoeffs a = jacobian_coeff_slopes(g, r.sin_h, r.cos_h), b = jacobian_coeff_slopes(g);
+    const double e[3] = {std::fabs(a.a - b.a) / std::fabs(b.a), std::fabs(a.b - b.b) / std::fabs(b.b),
+                         std::fabs(a.c - b.c) / std::fabs(b.c)};
+    for (double x : e) {
+      worst = std::fmax(worst, x);
+      expect(x < 1e-9, "slopes from sin/cos(f/2) = slopes from f", x, f);
+    }
+  }
+  std::printf("  slopes from a relative rotation: worst rel. difference %.2e\n", worst);
+}
+
 // the coefficient slopes a'(f)/f, b'(f)/f, c'(f)/f against central differences of the
 // coefficients (reference_coeffs), on both sides of the series threshold
 void test_coefficient_slopes() {
@@ -376,6 +414,7 @@ int main() {
   test_chord_gradient();
   test_coefficient_slopes();
   test_rotation_gradient();
+  test_matrix_forms();
   test_damping();
   test_rotation_integrator();
   test_critical_steps();

@@ -123,8 +123,9 @@ void test_pairs() {
 // ribbons: collapsed fibers (rectangular contact sections 2 r x 2 r/4) lying flat, which stack at
 // their thickness 2 r/4, not at the 2 r of a circle
 // sparse_from: the Stepper's threshold of the sparse capacitance LU; final: the nodes at the end
+// reuse: the Stepper's reuse_analysis; reused: how often it reused an analysis
 void test_stack(double h, double v0, double T = 0.02, bool ribbons = false, std::size_t sparse_from = 128,
-                std::vector<Vec3> *final = nullptr) {
+                std::vector<Vec3> *final = nullptr, bool reuse = true, long *reused = nullptr) {
   const double R = 60e-6, d = 150e-6, L = 0.6e-3, acc = 2000.0, r = 10e-6;
   const double t = ribbons ? 0.25 * r : r;  // half-thickness: the centre line's height on a support
   StaticBodies yarns;
@@ -147,6 +148,7 @@ void test_stack(double h, double v0, double T = 0.02, bool ribbons = false, std:
   for (rod::Node &nd : A.nodes) nd.v = {0, 0, -v0};
   sim.opt.tau_drag = 1e-3;
   sim.stepper.sparse_from = sparse_from;
+  sim.stepper.reuse_analysis = reuse;
   for (Fiber *f : sim.fibers) sim.stepper.initialise(f->nodes, f->els, sim.opt);
   const rod::GenAlpha g = rod::gen_alpha(0.5);
   const int steps = static_cast<int>(std::lround(T / h));
@@ -177,6 +179,7 @@ void test_stack(double h, double v0, double T = 0.02, bool ribbons = false, std:
   expect(ok, what);
   if (!ok) return;
   gather();
+  if (reused) *reused = sim.stepper.pattern_reused;
   if (final) {
     final->clear();
     for (const rod::Node &nd : all) final->push_back(nd.x);
@@ -284,6 +287,17 @@ void test_sparse_capacitance() {
   expect(xs.size() == xd.size() && !xs.empty(), "sparse capacitance: both runs give the stack");
   expect(d < 1e-15, "sparse capacitance: the same stack as the dense LU (m)", d, 1e-15);
   std::printf("sparse capacitance: stack after 20 ms, sparse vs dense LU: largest node difference %.3e m\n", d);
+  // a repeated pattern factored on the previous analysis: the same factors, so the same stack bit
+  // for bit as analysing every matrix afresh
+  std::vector<Vec3> xf;
+  long reused = 0, reused_off = 0;
+  test_stack(1e-5, 0.05, 0.02, false, 0, &xs, true, &reused);
+  test_stack(1e-5, 0.05, 0.02, false, 0, &xf, false, &reused_off);
+  bool same = xs.size() == xf.size() && !xs.empty();
+  for (std::size_t k = 0; same && k < xs.size(); ++k) same = xs[k].x == xf[k].x && xs[k].y == xf[k].y && xs[k].z == xf[k].z;
+  expect(reused > 0 && reused_off == 0, "sparse capacitance: patterns repeat and their analysis is reused", static_cast<double>(reused), 0);
+  expect(same, "sparse capacitance: reusing the analysis gives the stack bit for bit");
+  std::printf("sparse capacitance: %ld of the factorisations reused the previous analysis\n", reused);
 }
 
 int main() {

@@ -26,8 +26,11 @@ constexpr int kBB = kB * kB;
 
 // In-place LU with partial pivoting of an n x n row-major matrix; piv receives the row order.
 // Returns false if a pivot is zero or not finite. (Also the dense capacitance solve of the
-// Woodbury couplings in physics/implicit_rod.h.)
-inline bool lu_factor(int n, double *a, int *piv) {
+// Woodbury couplings in physics/implicit_rod.h.) N > 0 fixes the size at compile time (the 6 x 6
+// blocks: unrolled loops, the same operations in the same order); N = 0 takes n.
+template <int N = 0>
+inline bool lu_factor(int n_, double *a, int *piv) {
+  const int n = N > 0 ? N : n_;
   for (int i = 0; i < n; ++i) piv[i] = i;
   for (int c = 0; c < n; ++c) {
     int p = c;
@@ -61,34 +64,48 @@ inline bool lu_factor(int n, double *a, int *piv) {
   return true;
 }
 
-// Solves (LU) y = b for one right-hand side (n values in b, the solution in y; y != b).
-inline void lu_solve(int n, const double *lu, const int *piv, const double *b, double *y) {
-  for (int i = 0; i < n; ++i) y[i] = b[piv[i]];
+// Solves (LU) Y = B for m right-hand sides, the columns of the row-major n x m B (Y in y, y != b;
+// m = 1: one vector). Row operations on all columns at once; each entry sees the operations of a
+// one-column solve in the same order. N, M > 0 fix n, m at compile time.
+template <int N = 0, int M = 1>
+inline void lu_solve_cols(int n_, const double *lu, const int *piv, const double *b, double *y) {
+  const int n = N > 0 ? N : n_;
   for (int i = 0; i < n; ++i)
-    for (int k = 0; k < i; ++k) y[i] -= lu[i * n + k] * y[k];
+    for (int c = 0; c < M; ++c) y[i * M + c] = b[piv[i] * M + c];
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < i; ++k) {
+      const double l = lu[i * n + k];
+      for (int c = 0; c < M; ++c) y[i * M + c] -= l * y[k * M + c];
+    }
   for (int i = n - 1; i >= 0; --i) {
-    for (int k = i + 1; k < n; ++k) y[i] -= lu[i * n + k] * y[k];
-    y[i] /= lu[i * n + i];
+    for (int k = i + 1; k < n; ++k) {
+      const double u = lu[i * n + k];
+      for (int c = 0; c < M; ++c) y[i * M + c] -= u * y[k * M + c];
+    }
+    const double d = lu[i * n + i];
+    for (int c = 0; c < M; ++c) y[i * M + c] /= d;
   }
 }
 
-inline bool lu6(double *a, int *piv) { return lu_factor(kB, a, piv); }
+// Solves (LU) y = b for one right-hand side (n values in b, the solution in y; y != b).
+inline void lu_solve(int n, const double *lu, const int *piv, const double *b, double *y) {
+  lu_solve_cols<0, 1>(n, lu, piv, b, y);
+}
+
+inline bool lu6(double *a, int *piv) { return lu_factor<kB>(kB, a, piv); }
 
 // Solves (LU) x = b for one right-hand side (b overwritten by x).
 inline void lu6_solve(const double *lu, const int *piv, double *b) {
   double y[kB];
-  lu_solve(kB, lu, piv, b, y);
+  lu_solve_cols<kB, 1>(kB, lu, piv, b, y);
   for (int i = 0; i < kB; ++i) b[i] = y[i];
 }
 
 // Solves (LU) X = B for a 6 x 6 right-hand side B (row-major, overwritten by X).
 inline void lu6_solve_mat(const double *lu, const int *piv, double *B) {
-  double col[kB];
-  for (int c = 0; c < kB; ++c) {
-    for (int r = 0; r < kB; ++r) col[r] = B[r * kB + c];
-    lu6_solve(lu, piv, col);
-    for (int r = 0; r < kB; ++r) B[r * kB + c] = col[r];
-  }
+  double y[kBB];
+  lu_solve_cols<kB, kB>(kB, lu, piv, B, y);
+  for (int i = 0; i < kBB; ++i) B[i] = y[i];
 }
 
 // C -= A B (6 x 6)
