@@ -27,7 +27,7 @@ def tiny_laydown_scene(name: str, out: str, ranks: int, max_time_s: float) -> st
 name: {name}
 seed: 3
 output_dir: runs/{out}
-{tiny_piece(2.9e-3)}laydown: {{max_time_s: {max_time_s!r}, check_interval_s: 5.0e-4, settle_speed_m_s: 1.0e-9,
+{tiny_piece(2.9e-3)}laydown: {{terms: [steric], max_time_s: {max_time_s!r}, check_interval_s: 5.0e-4, settle_speed_m_s: 1.0e-9,
           settle_checks: 3, timestep_s: 1.0e-6, restart_interval_s: 1.0e-3, ranks: {ranks}}}
 contact: {{model: fiber_dlvo, terms: [steric]}}
 """

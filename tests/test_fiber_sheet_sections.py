@@ -283,7 +283,7 @@ fibers: {count: 2, length_m: 0.4e-3, width_m: 20.0e-6, segments: 8,
          youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9%s}
 fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}
 flow: {delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}
-laydown: {max_time_s: 0.001, check_interval_s: 5.0e-4}
+laydown: {terms: [steric], max_time_s: 0.001, check_interval_s: 5.0e-4}
 contact: {model: fiber_dlvo, terms: [vdw, steric], hamaker_J: 8.0e-21}
 press: {mode: pressure, target_pressure_Pa: 20.0}
 """

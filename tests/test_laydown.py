@@ -21,7 +21,7 @@ SCENE = f"""
 name: tiny_laydown
 seed: 3
 {tiny_piece(3.43e-3)}laydown: {{max_time_s: 0.012, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
-          timestep_s: 1.0e-6}}
+          terms: [steric], timestep_s: 1.0e-6}}
 """
 # Real stiffness and inertia, implicit fibers, yarn contact inside the Newton solve (the defaults).
 

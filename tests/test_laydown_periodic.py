@@ -52,7 +52,7 @@ fibers: {count: 5, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
          youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}
 fiber_generation: {placement_lo_m: [-0.4e-3, 0.0, 2.56e-3], placement_hi_m: [0.6e-3, 1.0e-3, 2.9e-3]}
 """ + FABRIC + """flow: {delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}
-laydown: {walls: periodic, max_time_s: 0.005, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3,
+laydown: {terms: [steric], walls: periodic, max_time_s: 0.005, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3,
           settle_checks: 3, timestep_s: 1.0e-6, restart_interval_s: 0.0, ranks: %(ranks)d}
 contact: {model: fiber_dlvo, terms: [steric]}
 """
@@ -473,7 +473,7 @@ def _periodic_input(yarns_h5: Path, steps: int) -> str:
         "         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}\n"
         + FABRIC.replace("size_x_m: 1.0e-3", "size_x_m: 2.0e-3").replace("cd_bottom_diameter_m: 0.12e-3}",
                                                                           "cd_bottom_diameter_m: 0.12e-3, lower_side_z_m: 0.1e-3}")
-        + "laydown: {walls: periodic, timestep_s: 1.0e-6, check_interval_s: 1.0e-4, max_time_s: 1.0e-3}\n"
+        + "laydown: {terms: [steric], walls: periodic, timestep_s: 1.0e-6, check_interval_s: 1.0e-4, max_time_s: 1.0e-3}\n"
         "contact: {model: fiber_dlvo, terms: [steric]}\n"))
     assert scene.fibers is not None and scene.laydown is not None
     s = LiggghtsInput()

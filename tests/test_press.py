@@ -44,7 +44,7 @@ fibers: {{count: 8, length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,
 fiber_generation: {{placement_lo_m: [0.0, 0.0, 2.66e-3], placement_hi_m: [1.0e-3, 1.0e-3, 2.76e-3]}}
 fabric: {{size_x_m: 1.0e-3, size_y_m: 1.0e-3}}
 flow: {{delta_p_Pa: 100.0, cell_size_m: 50.0e-6, height_above_fabric_m: 0.8e-3}}
-laydown: {{max_time_s: 0.006, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
+laydown: {{terms: [steric], max_time_s: 0.006, check_interval_s: 5.0e-4, settle_speed_m_s: 2.0e-3, settle_checks: 3,
           timestep_s: 1.0e-6, friction_coefficient: 0.5}}
 contact: {{model: fiber_dlvo, terms: [steric]}}
 """

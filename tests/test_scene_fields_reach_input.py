@@ -121,6 +121,22 @@ def test_field_changes_the_generated_input(section: str, field: str) -> None:
     assert base != render(section, field, needs), f"{section}.{field} does not reach the input"
 
 
+def test_thesis_law_by_default() -> None:
+    """A scene without laydown.terms lays down with the thesis' law against yarns and walls (van der
+    Waals, electrostatics, steric; issue 10: thesis physics by default, fewer terms only when asked
+    for), and the law's terms reach every yarn and wall fix of the generated input."""
+    assert LaydownSection.model_fields["terms"].default == ["vdw", "es", "steric"]
+    def law_fixes(text: str) -> list[str]:
+        return [ln for ln in text.splitlines()
+                if ln.startswith("fix") and ("wall/fiber/yarns" in ln or "wall/fiber/dlvo" in ln)]
+
+    fixes = law_fixes(render())
+    assert len(fixes) == 5, fixes  # the yarns and the four side planes
+    assert all(" terms vdw,es,steric " in f" {ln} " for ln in fixes), fixes
+    other = law_fixes(render("laydown", "terms"))  # the alternative [steric, vdw]
+    assert other and not any(" terms vdw,es,steric " in f" {ln} " for ln in other), other
+
+
 # ---- permeability (issue 12): every field reaches the box case, the run options or the output --
 
 PERM_ALTERNATIVES: dict[str, object] = {

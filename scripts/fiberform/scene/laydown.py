@@ -60,7 +60,10 @@ class LaydownSection(_Section):
         default="fiber_yarns",
     )
     terms: list[ContactTerm] = choice(
-        "Terms of the fiber/dlvo law against yarns and walls", default=["steric"]
+        "Terms of the fiber/dlvo law against yarns and walls (default: the thesis' law, van der "
+        "Waals, electrostatics and steric repulsion, with the style's cited parameters for "
+        "cellulose in process water; fewer terms are a speed option)",
+        default=["vdw", "es", "steric"],
     )
     friction_coefficient: float = quantity(
         "Coulomb friction coefficient of fibers on yarns and fiber_yarns side planes (keyword "
