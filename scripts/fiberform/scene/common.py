@@ -63,10 +63,7 @@ class ContactSection(_Section):
         "repulsion, sub-integrated per contact)"
     )
     integrator: Literal["cvode", "substep", "none"] = choice(
-        "Per-contact time integration with laydown.fiber_contact averaged: cvode (the thesis' "
-        "method, the default), substep (velocity-Verlet sub-steps, a speed option) or none (forces "
-        "from the plain DEM step, a speed option); unused with fiber_contact newton",
-        default="cvode",
+        "Per-contact time integration (none: forces from the plain DEM step)", default="none"
     )
     terms: list[ContactTerm] = choice(
         "Colloidal force terms (fiber_dlvo only)", default=[]
