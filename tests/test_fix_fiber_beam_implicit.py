@@ -477,8 +477,15 @@ def test_stability_drag_plane_and_fiber_contact(fiberdem_build: Path, tmp_path: 
     lower, upper = fin[:11], fin[11:]
     # where they cross (the middle nodes), the upper fiber's centre is above the lower one's
     assert upper[5, 3] > lower[5, 3] + r, (upper[5, 3], lower[5, 3])
-    # they did fall onto each other/the plane: the upper fiber moved down by at least its gap
-    assert upper[5, 3] < 3 * r + 1.0e-6 + 1e-7 or dt * steps < 1e-4
+    # they did fall onto each other and onto the plane (each started 0.5 um apart): at least half
+    # of both gaps closed. (Until session 26 this read "the upper fiber's centre at most 0.1 um
+    # above its start", which also held for fibers that never touched, and which the averaged
+    # contact's chatter at 1e-5 s (about +-1 um, docs/stages/laydown.md) broke with another
+    # build's round-off: the pair, in contact, 0.25 um above the start after 3 ms; the two builds'
+    # trajectories part from 1e-20 m at 25 steps to 0.6 um at 150 steps, as a bouncing contact does.)
+    if dt * steps >= 1e-4:
+        assert upper[5, 3] - lower[5, 3] - 2 * r < 0.25e-6, (upper[5, 3], lower[5, 3])
+        assert lower[:, 3].min() - r < 0.25e-6, lower[:, 3].min()
 
 
 @pytest.mark.parametrize("dt", [1e-5, 1e-4])
