@@ -321,15 +321,6 @@ inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
   return r;
 }
 
-// The rotation columns of ElementChordGradient (elastic element). With the body-frame right
-// rotation e of node A (B), theta changes by -J_l(theta)^-1 e (J_l(theta)^-T e), the mid frame by
-// the body rotation psi = H^T e + J_l(theta/2)^T dtheta/2 (J_l(theta/2)^T dtheta/2), H = exp(theta/2),
-// and R_A (for A) by R_A e^. Then dGamma = (R_m^T d x psi)/L0, dn = R_m (psi x N + C_G dGamma),
-// dkappa = dtheta/L0, m = R_A J_l^-T M and P u = R_A W R_A^T u (W = J_l^-T(theta) J_l^T(theta/2)/2) by
-// the product rule with the directional derivatives of the J_l operators (coefficient slopes from
-// jacobian_coeff_slopes). Every step is linear in e, so the three columns of each node are formed
-// at once as 3 x 3 matrices (D_theta, Psi, then the forces'), which costs a third of forming them
-// column by column. Tested against central differences of element_forces (test_beam.cpp).
 // The matrices both gradients share: R_A, R_m, J_l^-T(theta), J_l^T(theta/2), W and P = R_A W R_A^T.
 struct ElementGradientFrames {
   Mat3 RA, RAt, Rm, Jt, Jh, W, P;
@@ -345,6 +336,17 @@ inline ElementGradientFrames element_gradient_frames(Quat qA, Quat qm, const Rel
   F.P = F.RA * F.W * F.RAt;
   return F;
 }
+
+// The rotation columns of ElementChordGradient (elastic element). With the body-frame right
+// rotation e of node A (B), theta changes by -J_l(theta)^-1 e (J_l(theta)^-T e), the mid frame by
+// the body rotation psi = H^T e + J_l(theta/2)^T dtheta/2 (J_l(theta/2)^T dtheta/2), H = exp(theta/2),
+// and R_A (for A) by R_A e^. Then dGamma = (R_m^T d x psi)/L0, dn = R_m (psi x N + C_G dGamma),
+// dkappa = dtheta/L0, m = R_A J_l^-T M and P u = R_A W R_A^T u (W = J_l^-T(theta) J_l^T(theta/2)/2) by
+// the product rule with the directional derivatives of the J_l operators (coefficient slopes from
+// jacobian_coeff_slopes). Every step is linear in e, so the three columns of each node are formed
+// at once as 3 x 3 matrices (D_theta, Psi, then the forces'); with the chord columns done alike,
+// an element's forces and gradients take half the time of the column-by-column form
+// (docs/models/beam.md). Tested against central differences of element_forces (test_beam.cpp).
 inline void element_rotation_gradient(const ElementGradientFrames &F, const RelativeRotation &rr, Vec3 d, Vec3 N,
                                       Vec3 M, Vec3 u, const ElementRef &ref, const Stiffness &C,
                                       ElementChordGradient *g) {
