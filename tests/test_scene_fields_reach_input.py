@@ -126,6 +126,7 @@ def test_thesis_law_by_default() -> None:
     Waals, electrostatics, steric; issue 10: thesis physics by default, fewer terms only when asked
     for), and the law's terms reach every yarn and wall fix of the generated input."""
     assert LaydownSection.model_fields["terms"].default == ["vdw", "es", "steric"]
+
     def law_fixes(text: str) -> list[str]:
         return [ln for ln in text.splitlines()
                 if ln.startswith("fix") and ("wall/fiber/yarns" in ln or "wall/fiber/dlvo" in ln)]

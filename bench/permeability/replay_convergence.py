@@ -27,11 +27,13 @@ import numpy as np
 from fiberform.porous_media import flow_rate_convergence
 
 
-def stop_iteration(q: np.ndarray, window: int, tolerance: float) -> int | None:
-    """The first iteration count at which the rule holds on the history ``q`` (None: never)."""
+def stop_iteration(q: np.ndarray, window: int, tolerance: float) -> tuple[int, float] | None:
+    """The first iteration count at which the rule holds on the history ``q`` and the mean outflow
+    of that window (None: never)."""
     for n in range(window, len(q) + 1):
-        if flow_rate_convergence(q[:n], window, tolerance).converged:
-            return n
+        check = flow_rate_convergence(q[:n], window, tolerance)
+        if check.converged:
+            return n, check.mean_m3_s
     return None
 
 
@@ -52,12 +54,13 @@ def main() -> int:
         own = flow_rate_convergence(q, args.window, 1.0).mean_m3_s
         cells = []
         for tol in args.tolerances:
-            n = stop_iteration(q, args.window, tol)
-            totals[tol] += n if n is not None else len(q)
-            if n is None:
+            stop = stop_iteration(q, args.window, tol)
+            if stop is None:
+                totals[tol] += len(q)
                 cells.append(f"{tol:g}: not met ({len(q)} run)")
             else:
-                mean = flow_rate_convergence(q[:n], args.window, tol).mean_m3_s
+                n, mean = stop
+                totals[tol] += n
                 cells.append(f"{tol:g}: {n} ({100.0 * (mean / own - 1.0):+.2f} %)")
         print(f"{'/'.join(path.parts[-7:-5])}: " + " | ".join(cells))
     print("total iterations: " + ", ".join(f"{tol:g}: {n}" for tol, n in totals.items()))

@@ -323,17 +323,16 @@ inline ElementRef element_reference(Vec3 xA, Quat qA, Vec3 xB, Quat qB) {
 
 // The matrices both gradients share: R_A, R_m, J_l^-T(theta), J_l^T(theta/2), W and P = R_A W R_A^T.
 struct ElementGradientFrames {
-  Mat3 RA, RAt, Rm, Jt, Jh, W, P;
+  Mat3 RA, Rm, Jt, Jh, W, P;
 };
 inline ElementGradientFrames element_gradient_frames(Quat qA, Quat qm, const RelativeRotation &rr) {
   ElementGradientFrames F;
   F.RA = rotation_matrix(qA);
-  F.RAt = transpose(F.RA);
   F.Rm = rotation_matrix(qm);
   F.Jt = so3_matrix(rr.th, 0.5, rr.k.c);
   F.Jh = so3_matrix(0.5 * rr.th, -rr.k_half.a, rr.k_half.b);
   F.W = 0.5 * (F.Jt * F.Jh);
-  F.P = F.RA * F.W * F.RAt;
+  F.P = F.RA * F.W * transpose(F.RA);
   return F;
 }
 

@@ -255,13 +255,6 @@ struct Stats {
   double dissipation = 0;
 };
 
-// Body-frame spatial helpers
-inline void skew(const Vec3 &a, double S[9]) {
-  S[0] = 0; S[1] = -a.z; S[2] = a.y;
-  S[3] = a.z; S[4] = 0; S[5] = -a.x;
-  S[6] = -a.y; S[7] = a.x; S[8] = 0;
-}
-
 // One column of the rank-one couplings of the iteration matrix (Stepper::build_couplings).
 struct CouplingColumn {
   int node[4];
@@ -740,16 +733,14 @@ class Stepper {
         }
         if (!tangent) continue;
         const double Dfull[9] = {D[0], D[3], D[4], D[3], D[1], D[5], D[4], D[5], D[2]};
-        double SW[9], SJW[9], Sb[9];
-        skew(nd.W, SW);
-        skew(JW, SJW);
-        skew(b, Sb);
+        // the skew matrices [W]x, [J W]x, [b]x (entry i, j: column j's component i)
+        const physics::Mat3 SW = physics::skew(nd.W), SJW = physics::skew(JW), Sb = physics::skew(b);
         for (int i = 0; i < 3; ++i) {
           Dk[i * 6 + i] += bp * nd.m + gp * nd.m * inv_tau;
           Dk[(3 + i) * 6 + 3 + i] += bp * nd.J[i] + gp * inv_tau * nd.J[i];
           for (int j = 0; j < 3; ++j) {
             Dk[i * 6 + j] += gp * Dfull[i * 3 + j];
-            Dk[(3 + i) * 6 + 3 + j] += gp * (SW[i * 3 + j] * nd.J[j] - SJW[i * 3 + j]) - Sb[i * 3 + j];
+            Dk[(3 + i) * 6 + 3 + j] += gp * (SW.c[j][i] * nd.J[j] - SJW.c[j][i]) - Sb.c[j][i];
           }
         }
         if (!have_models) continue;
