@@ -225,6 +225,7 @@ class ClusterContactModel : public rod::NodeForceModel {
 
   void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
     near_.clear();
+    slide_.clear();
     contacts_ = 0;
     min_gap_ = std::numeric_limits<double>::max();
     for (const Local &lp : local_) {
@@ -238,17 +239,26 @@ class ClusterContactModel : public rod::NodeForceModel {
       if (!(dist > 0.0)) continue;
       Vec3 n = (1.0 / dist) * d;
       double h = dist;
+      const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
+      Near nr{{idx[0], idx[1], idx[2], idx[3]}, {w[0], w[1], w[2], w[3]}, n, h, -1};  // n, h set below
       if (rect_section(A0) || rect_section(A1) || rect_section(B0) || rect_section(B1)) {
         // rectangles (frames held over the step); the force along the gap's gradient
         Vec3 deA, deB;
         auto t2 = [&](int i) { return frames_.t2_of(nodes, static_cast<std::size_t>(idx[i])); };
         h = h - element_extent(A0, A1, t2(0), t2(1), n, &deA) - element_extent(B0, B1, t2(2), t2(3), n, &deB);
+        // the limiter predicts the gap's change with the gap's gradient, contact points sliding
+        // (docs/models/contact.md section 9, session 27); the force keeps the direction below
+        nr.slide = static_cast<int>(slide_.size());
+        slide_.emplace_back();
+        gap_node_gradient(A0.x, A1.x, B0.x + lp.shift, B1.x + lp.shift, s, t, d,
+                          gap_gradient(n, dist, deA + deB), slide_.back().g, kSlideFade);
         n = gap_gradient_dir(n, dist, deA + deB);
       } else {
         h = h - element_extent(A0, A1, n) - element_extent(B0, B1, n);  // circles: (dist - r_A) - r_B
       }
-      const double w[4] = {1.0 - s, s, -(1.0 - t), -t};
-      near_.push_back({{idx[0], idx[1], idx[2], idx[3]}, {w[0], w[1], w[2], w[3]}, n, h});
+      nr.n = n;
+      nr.h = h;
+      near_.push_back(nr);
       min_gap_ = std::min(min_gap_, h);
       if (h >= law_.h_cut) continue;
       ++contacts_;
@@ -272,9 +282,16 @@ class ClusterContactModel : public rod::NodeForceModel {
   double limit(const std::vector<rod::Node> &, const std::vector<Vec3> &dx) const override {
     double frac = 1.0;
     for (const Near &c : near_) {
-      Vec3 d;
-      for (int i = 0; i < 4; ++i) d = d + c.w[i] * dx[static_cast<std::size_t>(c.node[i])];
-      frac = std::min(frac, BodyContactModel::landing_fraction(law_, c.h, dot(c.n, d)));
+      double dh = 0.0;
+      if (c.slide >= 0) {
+        const Vec3 *g = slide_[static_cast<std::size_t>(c.slide)].g;
+        for (int i = 0; i < 4; ++i) dh += dot(g[i], dx[static_cast<std::size_t>(c.node[i])]);
+      } else {
+        Vec3 d;
+        for (int i = 0; i < 4; ++i) d = d + c.w[i] * dx[static_cast<std::size_t>(c.node[i])];
+        dh = dot(c.n, d);
+      }
+      frac = std::min(frac, BodyContactModel::landing_fraction(law_, c.h, dh));
     }
     return frac;
   }
@@ -335,12 +352,17 @@ class ClusterContactModel : public rod::NodeForceModel {
     double w[4];
     Vec3 n;
     double h;
+    int slide;  // rectangles: index in slide_ (the limiter predicts dh = sum g[i] . dx[i]); circles -1
+  };
+  struct Slide {
+    Vec3 g[4];  // dh/dx of the four nodes, contact points sliding (gap_node_gradient)
   };
   const FiberPartners &partners_;
   const ContactLaw &law_;
   SectionFrames frames_;  // the rectangles' frames at the start of the step
   std::vector<Local> local_;
   std::vector<Near> near_;
+  std::vector<Slide> slide_;
   int contacts_ = 0;
   double min_gap_ = 0.0;
 };
