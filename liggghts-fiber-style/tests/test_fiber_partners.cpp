@@ -309,8 +309,9 @@ void test_sparse_capacitance() {
 // correction that would carry two ribbons from 50 nm apart to deep inside each other, cut by the
 // limiter's fraction, ends them at the landing gap 0 up to second order in the correction. Two
 // ribbons (2 a1 x 2 a2 = 20 x 5 um) crossing at 60 degrees, the upper one rolled 30 degrees about its
-// axis; random corrections of the four nodes of the crossing elements (each component up to 3 times
-// the gap's predicted change, so that the contact points slide and the normal turns). The
+// axis; 20 random corrections of the nodes of the crossing elements (each component up to 3 x 50 nm,
+// so that the contact points slide and the normal turns, plus 50 nm towards each other on each
+// side). The
 // prediction at fixed contact points along the force's unit direction (before session 27) missed
 // the landing by up to 37 % of the starting gap in this test, the sliding gradient by 0.64 %
 // (measured); bound: 5 %.
@@ -318,9 +319,9 @@ void test_rect_limiter_prediction() {
   using fiberform::testing::make_ribbon;
   const double r = 10e-6, t = 0.25 * r, L = 0.6e-3, h0 = 50e-9;
   Fiber A = make_ribbon(12, L, r, t, {0, 0, 0}, false);  // along x, flat
-  Fiber B = make_ribbon(12, L, r, t, {0, 0, 0}, true);   // along y, turned below
+  Fiber B = make_ribbon(12, L, r, t, {0, 0, 0}, true);   // along y, turned and lifted below
   // B: turned 30 degrees about z (crossing at 60 degrees) and rolled 30 degrees about its own axis t3,
-  // its centre line crossing A's mid-element (not at a node), then lifted to the gap h0 below
+  // its centre line crossing A's element 6 at x = 16 um (not at a node), then set 50 nm above A
   const beam::Quat turn = beam::qexp({0, 0, beam::kPi / 6});
   for (rod::Node &nd : B.nodes) {
     nd.x = beam::qrot(turn, nd.x) + Vec3{12e-6, 7e-6, 0};
@@ -377,7 +378,7 @@ void test_rect_limiter_prediction() {
     std::vector<Vec3> dx(all.size());
     for (int k : {6, 7, off[1] + 5, off[1] + 6, off[1] + 7})
       dx[static_cast<std::size_t>(k)] = (3 * h0) * Vec3{uniform(), uniform(), uniform()};
-    // push the pair together: A up, B down by 2 h0 on top of the random parts
+    // push the pair together: A's nodes up, B's down by h0 each, on top of the random parts
     for (int k : {6, 7}) dx[static_cast<std::size_t>(k)].z += h0;
     for (int k : {off[1] + 5, off[1] + 6, off[1] + 7}) dx[static_cast<std::size_t>(k)].z -= h0;
     gap(all);
