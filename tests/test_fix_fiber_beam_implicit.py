@@ -622,3 +622,54 @@ def test_fiber_pair_inside_the_newton_solve(fiberdem_build: Path, tmp_path: Path
     assert abs(lower[:, 3] - r).max() < 0.01 * r, lower[:, 3] - r       # the lower fiber on the plane
     assert abs(upper[5, 3] - 3 * r) < 0.01 * r, upper[5, 3] - 3 * r     # the upper one on the lower one
     assert np.linalg.norm(fin[:, 4:7], axis=1).max() < 0.1 * u_flow
+
+
+def _pair_in_cross_flow(fiber_friction: float, steps: int, dt: float) -> Case:
+    """The _crossing_pair (10 um fibers, 20 um elements) on the plane z = 0 in a uniform flow
+    (4, 0, -20) mm/s: the lower fiber (along x) held by the plane's friction 2, the upper one
+    (along y) pressed onto it and dragged sideways along the lower one's axis; pair_style
+    fiber/dlvo inside the Newton solve with Coulomb friction ``fiber_friction`` between them (stick
+    factor 1000: a stuck contact creeps at F_t / c_stick, c_stick = k m_eff / dt)."""
+    width, element = 10e-6, 20e-6
+    L, r = 10 * element, width / 2
+    pair = "pair_style fiber/dlvo implicit_force newton terms steric"
+    if fiber_friction > 0.0:
+        pair += f" friction {fiber_friction!r} friction_stick 1000"
+    return implicit_case(
+        _crossing_pair(width, element), [-0.6 * L, -0.6 * L, -r], [0.6 * L, 0.6 * L, 6 * r + 5e-6],
+        dt=dt, steps=steps, newton="on",
+        commands=[f"fix drag all fiber/drag flow uniform {0.2 * PAIR_FLOW_M_S!r} 0 {-PAIR_FLOW_M_S!r}",
+                  "fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms steric implicit_force newton "
+                  "friction 2.0",
+                  pair, "pair_coeff * *"],
+        thermo_every=steps)
+
+
+def test_fiber_friction_holds_a_fiber_on_another(fiberdem_build: Path, tmp_path: Path) -> None:
+    """pair_style fiber/dlvo `friction` (fiber-fiber Coulomb friction inside the Newton solve,
+    docs/models/contact.md section 9): the upper fiber of _pair_in_cross_flow is pushed sideways
+    with 0.2 of the force that presses it on the lower one. Frictionless (the thesis' law) it slides
+    along the lower fiber with the flow (more than half of 4 mm/s x 10 ms = 40 um); with
+    friction 0.5 > 0.2 it stays stuck: relative to the lower fiber it moves by less than 2 % of
+    that (measured 0.29 um: the landing and the regularisation's creep; 1.4 um with the default
+    stick factor 100). The lower fiber stays on its plane in both (less than 1 um; it creeps there
+    by 0.36 um under the plane's friction). The keyword is refused outside implicit_force newton."""
+    dt, steps = 1e-5, 1000
+    x0 = np.vstack([f.x for f in _crossing_pair(10e-6, 20e-6)])
+    free = run_case(fiberdem_build, tmp_path / "free", _pair_in_cross_flow(0.0, steps, dt)).final
+    held = run_case(fiberdem_build, tmp_path / "held", _pair_in_cross_flow(0.5, steps, dt)).final
+    ux_t = 0.2 * PAIR_FLOW_M_S * dt * steps
+    # the upper fiber's mean motion along x relative to the lower one's (which creeps on its plane)
+    slid = float(np.mean(free[11:, 1] - x0[11:, 0]) - np.mean(free[:11, 1] - x0[:11, 0]))
+    crept = float(np.mean(held[11:, 1] - x0[11:, 0]) - np.mean(held[:11, 1] - x0[:11, 0]))
+    assert slid > 0.5 * ux_t, (slid, ux_t)
+    assert abs(crept) < 0.02 * slid, (crept, slid)
+    for fin in (free, held):
+        assert np.abs(fin[:11, 1:4] - x0[:11]).max() < 1e-6
+        assert np.all(np.isfinite(fin[:, 1:7]))
+    bad = implicit_case(_crossing_pair(10e-6, 20e-6), [-1.2e-4, -1.2e-4, -5e-6], [1.2e-4, 1.2e-4, 4e-5],
+                        dt=1e-6, steps=1,
+                        commands=["pair_style fiber/dlvo integrator cvode terms steric friction 0.5",
+                                  "pair_coeff * *"])
+    with pytest.raises(RuntimeError, match="friction between fibers needs implicit_force newton"):
+        run_case(fiberdem_build, tmp_path / "bad", bad)

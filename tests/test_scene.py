@@ -386,3 +386,43 @@ def test_domain_is_the_flow_box_when_absent() -> None:
     assert explicit.domain is not None and explicit.domain.hi_m[2] == 5.0e-3
     # without a flow section there is no box to derive
     assert parse_scene(read_scene_yaml("name: d\nfabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}\n")).domain is None
+
+
+def _laydown_scene(**laydown: object) -> Scene:
+    data = read_scene_yaml(ALL_SECTIONS)
+    data["laydown"] = dict(laydown)
+    return parse_scene(data, "s.yaml")
+
+
+def test_hash_neutral_field_at_default_keeps_earlier_hashes() -> None:
+    """A field declared hashed_at_default=False (laydown.fiber_friction_coefficient, added in
+    session 28) is left out of the stage hash at its default: the hash equals the one taken over
+    the section without that field (what the code before the field computed), so finished
+    products stay up to date; any other value changes the hash."""
+    import hashlib
+    import json
+
+    from fiberform.scene.model import section_hash
+
+    absent = _laydown_scene(friction_coefficient=0.5)
+    explicit = _laydown_scene(friction_coefficient=0.5, fiber_friction_coefficient=0.0)
+    data = absent.model_dump(mode="json")
+    del data["laydown"]["fiber_friction_coefficient"]
+    before = "sha256:" + hashlib.sha256(json.dumps({"laydown": data["laydown"]}, sort_keys=True,
+                                                   separators=(",", ":")).encode()).hexdigest()
+    assert section_hash(absent, ["laydown"]) == before
+    assert section_hash(explicit, ["laydown"]) == before
+    changed = _laydown_scene(friction_coefficient=0.5, fiber_friction_coefficient=0.3)
+    assert section_hash(changed, ["laydown"]) != before
+    # an ordinary field is hashed at its default too (changing a default makes products stale)
+    assert "friction_stick" in data["laydown"]
+
+
+def test_fiber_friction_needs_newton_fiber_contact() -> None:
+    with pytest.raises(Exception, match="fiber_friction_coefficient"):
+        _laydown_scene(fiber_friction_coefficient=0.5, fiber_contact="averaged")
+    # friction_stick is used by the fiber-fiber friction alone (no yarn friction)
+    s = _laydown_scene(fiber_friction_coefficient=0.5, friction_stick=10.0)
+    assert s.laydown is not None and s.laydown.friction_stick == 10.0
+    with pytest.raises(Exception, match="friction_stick"):
+        _laydown_scene(friction_stick=10.0)

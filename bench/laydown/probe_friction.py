@@ -180,10 +180,13 @@ def run_counted(argv: list[str], cwd: Path, stderr: Path) -> tuple[int, float, f
 
 
 def probe_fields(anderson: int = 0, tolerance: float | None = None,
-                 timestep: float | None = None, landing: str | None = None) -> dict[str, Any]:
-    """The scene fields of the options --anderson, --tolerance, --timestep, --landing (only those
-    given)."""
+                 timestep: float | None = None, landing: str | None = None,
+                 fiber_friction: float | None = None) -> dict[str, Any]:
+    """The scene fields of the options --anderson, --tolerance, --timestep, --landing,
+    --fiber-friction (only those given)."""
     out: dict[str, Any] = {}
+    if fiber_friction is not None:
+        out["laydown.fiber_friction_coefficient"] = fiber_friction
     if landing is not None:
         out["laydown.newton_landing"] = landing
     if anderson:
@@ -198,7 +201,7 @@ def probe_fields(anderson: int = 0, tolerance: float | None = None,
 def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
               anderson: int = 0, tolerance: float | None = None,
               timestep: float | None = None, landing: str | None = None, *,
-              ranks: int = 1, tag: str = "") -> dict[str, Any]:
+              ranks: int = 1, tag: str = "", fiber_friction: float | None = None) -> dict[str, Any]:
     """One probe of ``setting`` with ``build``'s fiberdem on ``ranks`` ranks, in the folder of the
     setting (+ ``tag``, e.g. ``-b1-np2``) under ``out_root``: its row."""
     mu, stick = parse_setting(setting)
@@ -210,7 +213,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
                          + (f"-aa{anderson}" if anderson else "")
                          + (f"-tol{tolerance:g}" if tolerance is not None else "")
                          + (f"-dt{timestep:g}" if timestep is not None else "")
-                         + (f"-land-{landing}" if landing is not None else "") + tag)
+                         + (f"-land-{landing}" if landing is not None else "")
+                         + (f"-ff{fiber_friction:g}" if fiber_friction is not None else "") + tag)
     folder.mkdir(parents=True, exist_ok=True)
     for name in ("log.probe", FINAL_DUMP, "traj.dump"):  # nothing of an earlier probe is read
         (folder / name).unlink(missing_ok=True)
@@ -226,7 +230,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
         else:
             target.symlink_to((work / name).resolve())
     atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick,
-                                                               probe_fields(anderson, tolerance, timestep, landing)))
+                                                               probe_fields(anderson, tolerance, timestep, landing,
+                                                                            fiber_friction)))
     fiberdem = build / "bin" / "fiberdem"
     program = [str(fiberdem), "-in", "in.probe", "-log", "log.probe"]
     argv = build_command(program, ranks)
@@ -238,6 +243,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     row: dict[str, Any] = {"run": str(run), "step": step, "steps": steps, "friction": mu,
                            "friction_stick": stick if mu > 0.0 else None, "anderson": anderson,
                            "newton_tolerance": tolerance, "timestep_s": timestep, "landing": landing,
+                           "fiber_friction": fiber_friction,
                            "exit": code,
                            "wall_s": wall, "folder": str(folder), "build": str(build),
                            "fiberdem": file_hash(fiberdem)}
@@ -359,6 +365,8 @@ def main() -> int:
                     help="laydown.timestep_s of every probe (default: the run's scene)")
     ap.add_argument("--landing", choices=("limit", "predict"), default=None,
                     help="laydown.newton_landing in every probe (default: the run's scene)")
+    ap.add_argument("--fiber-friction", type=float, default=None, metavar="MU",
+                    help="laydown.fiber_friction_coefficient of every probe (default: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
     ap.add_argument("--copies", type=int, nargs="+", default=[1], metavar="N",
                     help="run every combination also as N copies at the same time (default 1)")
@@ -411,7 +419,8 @@ def main() -> int:
         setting, k, b, r, n = job
         tag = (f"-b{b}-np{r}" if several else "") + (f"-c{copy}" if side_by_side else "")
         row = run_probe(args.run, args.step, args.steps, args.chunk, setting, builds[b], args.probes,
-                        args.anderson, args.tolerance, args.timestep, args.landing, ranks=r, tag=tag)
+                        args.anderson, args.tolerance, args.timestep, args.landing, ranks=r, tag=tag,
+                        fiber_friction=args.fiber_friction)
         row.update({"build_index": b, "repetition": k})
         if side_by_side:
             row.update({"copies": n, "copy": copy})

@@ -50,7 +50,8 @@ struct EngineConfig {
   bool implicit_impulse = false;
   bool implicit_newton = false;  // fix wall/fiber/dlvo: the plane inside the fibers' Newton solves
   // Coulomb friction coefficient against static bodies (fix wall/fiber/dlvo, fix wall/fiber/yarns;
-  // physics/friction.h averaged, physics/static_bodies.h inside the Newton solve); 0: none
+  // physics/friction.h averaged, physics/static_bodies.h inside the Newton solve) and, with
+  // implicit_force newton, between fibers (pair_style fiber/dlvo; physics/fiber_partners.h); 0: none
   double friction = 0.0;
   // inside the Newton solve only: the stick damping of the regularised friction, c_stick =
   // friction_stick m_eff / dt (physics/static_bodies.h); a stuck point creeps at F_t / c_stick

@@ -43,7 +43,7 @@ void FixFiberDlvoStep::init() {
   if (newton_ && !model_) {
     newton_law_ = cfg.law;
     newton_law_.steric.s1_damping = true;  // the PD servo, as the static bodies (docs/models/contact.md 8)
-    model_ = std::make_unique<phys::ClusterContactModel>(partners_, newton_law_);
+    model_ = std::make_unique<phys::ClusterContactModel>(partners_, newton_law_, cfg.friction, cfg.friction_stick);
   }
   if (beam_) beam_->use_force_model(model_.get(), newton_);
 }

@@ -56,8 +56,9 @@ void PairFiberDlvo::settings(int narg, char **arg) {
     iarg += used;
   }
   fiberform::validate_contact_config(lmp, "pair_style fiber/dlvo", cfg);
-  if (cfg.friction != 0.0) error->all(FLERR, "pair_style fiber/dlvo: friction acts against walls and yarns only");
-  if (cfg.friction_stick_set) error->all(FLERR, "pair_style fiber/dlvo: friction_stick acts against walls and yarns only");
+  // fiber-fiber friction acts inside the clusters' Newton solve only (ClusterContactModel)
+  if (cfg.friction != 0.0 && !cfg.implicit_newton)
+    error->all(FLERR, "pair_style fiber/dlvo: friction between fibers needs implicit_force newton");
   engine_->cfg = cfg;
   // the internal step fix exists from here on (so that thermo can name f_FIBER_DLVO_STEP[i])
   if (modify->find_fix(kStepFixId) < 0) {

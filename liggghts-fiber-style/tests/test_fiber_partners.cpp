@@ -14,7 +14,10 @@
      to 1e-5 s): total momentum conserved (relative 1e-9), no pass-through.
    - Two tilted ribbons 50 nm apart: a Newton correction cut by the contact limiter lands them at
      the landing gap to 5 % of the starting gap (the limiter's gap gradient with sliding contact
-     points). */
+     points).
+   - Fiber-fiber friction (mu 0.5): a fiber resting across two clamped fibers under a lateral load of
+     0.5 and 2 times mu times its weight creeps at the regularised law's closed-form speed (stuck)
+     or slides as (a_x - mu acc) with the background drag, both to 2 %; action = reaction. */
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -277,6 +280,96 @@ void test_free_collision(double h) {
   std::printf("free collision dt %g s: momentum error %.2e, smallest centre gap %.3g nm\n", h, dp, 1e9 * gap_min);
 }
 
+// Fiber-fiber friction (ClusterContactModel with a Coulomb coefficient): a fiber A (along y) rests
+// on two clamped fibers B1, B2 (along x, 0.25 mm apart), crossing each at an element's middle; load
+// acc per mass downwards, background drag time tau. After it has come to rest a lateral load a_x per
+// mass (along x: tangential at both contacts) is switched on. Closed forms of the regularised law
+// (physics/friction.h): each contact carries f = m_A acc / 2 and, stuck, F_t = m_A a_x / 2, so A
+// creeps at v = v_eps phi / sqrt(1 - phi^2), phi = a_x / (mu acc), v_eps = mu f / c_stick,
+// c_stick = k m_eff / h (m_eff = 2 m_node: A's contact point at an element's middle, B clamped);
+// sliding (a_x > mu acc) from rest, A moves x(T) = a' tau (T - tau (1 - exp(-T / tau))),
+// a' = a_x - mu acc (the regularisation's share is below 1e-3 here).
+void test_friction(double h, double phi) {
+  const double r = 10e-6, L = 0.6e-3, d = 125e-6, acc = 2000.0, mu = 0.5, tau = 1e-3, k = 100.0;
+  Fiber B1 = make_fiber(12, L, r, 0.6 * r, {0, -d, 0}, false);
+  Fiber B2 = make_fiber(12, L, r, 0.6 * r, {0, d, 0}, false);
+  for (Fiber *B : {&B1, &B2})
+    for (rod::Node &nd : B->nodes) nd.fixed = true;
+  // A's nodes at y = -0.3 mm + k 50 um: the supports y = -d, d lie at the middle of its elements 3, 8,
+  // symmetric about its centre (equal loads, so both contacts creep alike and A does not turn)
+  Fiber A = make_fiber(12, L, r, 0.6 * r, {5e-6, 0, 2 * r + 2e-9}, true);
+  Sim sim;
+  sim.law.steric.s1_damping = true;
+  ClusterContactModel between(sim.partners, sim.law, mu, k);
+  sim.models = {&between};
+  sim.fibers = {&A, &B1, &B2};
+  for (rod::Node &nd : A.nodes) nd.F = {0, 0, -acc * nd.m};
+  sim.opt.tau_drag = tau;
+  for (Fiber *f : sim.fibers) sim.stepper.initialise(f->nodes, f->els, sim.opt);
+  const rod::GenAlpha g = rod::gen_alpha(0.5);
+  bool ok = true;
+  const int rest = static_cast<int>(std::lround(5e-3 / h));
+  for (int s = 0; s < rest && ok; ++s) ok = sim.step(h, g);
+  auto xc = [&]() {
+    double x = 0.0;
+    for (const rod::Node &nd : A.nodes) x += nd.m * nd.x.x / A.mass;
+    return x;
+  };
+  const double ax = phi * mu * acc;
+  for (rod::Node &nd : A.nodes) nd.F = {ax * nd.m, 0, -acc * nd.m};
+  const double x0 = xc();
+  char what[200];
+  if (phi < 1.0) {
+    // stuck: 1 ms to reach the creep, its speed over the next ms
+    const int n1 = static_cast<int>(std::lround(1e-3 / h));
+    for (int s = 0; s < n1 && ok; ++s) ok = sim.step(h, g);
+    const double x1 = xc();
+    for (int s = 0; s < n1 && ok; ++s) ok = sim.step(h, g);
+    const double v = (xc() - x1) / 1e-3;
+    const double m_node = A.nodes[1].m, f = 0.5 * A.mass * acc;
+    const double v_eps = mu * f / (k * 2.0 * m_node / h);
+    const double want = v_eps * phi / std::sqrt(1.0 - phi * phi);
+    std::snprintf(what, sizeof what, "friction, dt %g s, load %.2f x mu f: converges", h, phi);
+    expect(ok, what);
+    std::snprintf(what, sizeof what, "friction, dt %g s, load %.2f x mu f: stuck, creeps at the regularised law's speed", h, phi);
+    expect(std::fabs(v / want - 1.0) < 0.02, what, v, want);
+    std::printf("friction dt %g s, load %.2f x mu f: creep %.4g m/s (closed form %.4g), moved %.3g um in 2 ms\n", h,
+                phi, v, want, 1e6 * (xc() - x0));
+  } else {
+    const double T = 2e-4;
+    const int n = static_cast<int>(std::lround(T / h));
+    for (int s = 0; s < n && ok; ++s) ok = sim.step(h, g);
+    const double a = ax - mu * acc;
+    const double want = a * tau * (T - tau * (1.0 - std::exp(-T / tau)));
+    const double x = xc() - x0;
+    std::snprintf(what, sizeof what, "friction, dt %g s, load %.2f x mu f: converges", h, phi);
+    expect(ok, what);
+    std::snprintf(what, sizeof what, "friction, dt %g s, load %.2f x mu f: slides as (a_x - mu acc) with the drag", h, phi);
+    expect(std::fabs(x / want - 1.0) < 0.02, what, x, want);
+    std::printf("friction dt %g s, load %.2f x mu f: slid %.4g um in %.3g ms (closed form %.4g um)\n", h, phi, 1e6 * x,
+                1e3 * T, 1e6 * want);
+  }
+  // action = reaction: the model's forces (normal and friction) sum to zero over the cluster
+  std::vector<rod::Node> all;
+  std::vector<int> ids{0, 1, 2}, off;
+  for (Fiber *f : sim.fibers) {
+    off.push_back(static_cast<int>(all.size()));
+    all.insert(all.end(), f->nodes.begin(), f->nodes.end());
+    all.back().next = false;
+  }
+  off.push_back(static_cast<int>(all.size()));
+  between.begin_cluster(ids, off);
+  between.begin_step(all, 0.0, h);
+  std::vector<Vec3> Fc(all.size());
+  between.evaluate(all, Fc, nullptr);
+  Vec3 sum{}, onA{};
+  for (std::size_t q = 0; q < all.size(); ++q) sum = sum + Fc[q];
+  for (int q = off[0]; q < off[1]; ++q) onA = onA + Fc[static_cast<std::size_t>(q)];
+  expect(std::fabs(onA.z / (acc * A.mass) - 1.0) < 1e-3, "friction: the contacts carry A's weight", onA.z / (acc * A.mass), 1.0);
+  std::snprintf(what, sizeof what, "friction, dt %g s: action = reaction (sum of the contact forces / load)", h);
+  expect(norm(sum) < 1e-12 * acc * A.mass, what, norm(sum), 1e-12 * acc * A.mass);
+}
+
 }  // namespace
 
 // The capacitance matrix of the cluster's couplings factored sparse (Eigen SparseLU, what piles of
@@ -402,5 +495,9 @@ int main() {
   for (double h : {1e-6, 1e-5}) test_stack(h, 0.05, 0.02, true);
   test_sparse_capacitance();
   test_rect_limiter_prediction();
+  for (double h : {1e-6, 1e-5}) {
+    test_friction(h, 0.5);
+    test_friction(h, 2.0);
+  }
   return fiberform::check::finish("test_fiber_partners");
 }

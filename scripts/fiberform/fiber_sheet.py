@@ -66,7 +66,8 @@ def static_body_words(ld: Any) -> list[object]:
 
 def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
     """pair_style fiber/dlvo keywords from the scene's contact section; mode: laydown.fiber_contact
-    (newton: the contacts inside the fibers' Newton solves, no sub-integration keywords)."""
+    (newton: the contacts inside the fibers' Newton solves, no sub-integration keywords); with
+    ``laydown.fiber_friction_coefficient`` > 0 the fiber-fiber friction and its stick factor."""
     c = scene.contact
     assert c is not None
     out: list[object]
@@ -87,6 +88,9 @@ def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
         out += ["h_cut", c.cutoff_m]
     if c.points_per_element is not None and mode != "newton":
         out += ["points", c.points_per_element]
+    ld = scene.laydown
+    if ld is not None and ld.fiber_friction_coefficient > 0.0:  # (validated: fiber_contact newton)
+        out += ["friction", ld.fiber_friction_coefficient, "friction_stick", ld.friction_stick]
     return out
 
 

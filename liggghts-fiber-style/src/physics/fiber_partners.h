@@ -14,6 +14,14 @@
    the rank-one term of ForceJacobian::Coupling (the rotation of n and the motion of s, t are left
    out, as for the static bodies), which the Stepper solves by the Woodbury identity.
 
+   Friction (optional; the thesis' law has none: coefficient 0, the default). With a coefficient
+   mu > 0 a compressive contact (f > 0) also carries the regularised Coulomb friction of the static
+   bodies (physics/friction.h regularized_friction_secant, the same law and stick factor):
+   -c v_t on A's contact point and +c v_t on B's, v_t the tangential part (normal to n) of their
+   relative velocity v_A(s) - v_B(t), c its secant coefficient at the pair's reduced mass
+   (1/m = 1/m_A + 1/m_B, each by the lever rule). Action equals reaction; its tangent is two more
+   rank-one couplings, along two unit vectors normal to n, with dF/du = -c.
+
    Why clusters. Solving each fiber alone against its partners' predicted motion (tried first) is a
    Jacobi iteration on a stiff coupling: a fiber resting on another that rests on yarns overshoots
    and the pair was driven through the yarns at steps of 1e-5 s (docs/models/contact.md section 9).
@@ -200,7 +208,11 @@ class FiberPartners {
 // The fiber-fiber contacts of one cluster inside its implicit step (see the file comment).
 class ClusterContactModel : public rod::NodeForceModel {
  public:
-  ClusterContactModel(const FiberPartners &partners, const ContactLaw &law) : partners_(partners), law_(law) {}
+  // friction: Coulomb coefficient of fiber-fiber contacts (0: none, the thesis' law); stick: the
+  // stick damping factor of its regularisation (c_stick = stick m / h, as BodyContactModel)
+  ClusterContactModel(const FiberPartners &partners, const ContactLaw &law, double friction = 0.0,
+                      double stick = BodyContactModel::kStick)
+      : partners_(partners), law_(law), mu_(friction), stick_(stick) {}
 
   // fibers: ids of the cluster's fibers in node-vector order, offsets: their first nodes
   void begin_cluster(const std::vector<int> &fibers, const std::vector<int> &offsets) override {
@@ -221,7 +233,10 @@ class ClusterContactModel : public rod::NodeForceModel {
     }
   }
   void begin_fiber(int) override { local_.clear(); }
-  void begin_step(const std::vector<rod::Node> &start, double, double) override { frames_.take(start); }
+  void begin_step(const std::vector<rod::Node> &start, double, double h) override {
+    h_ = h;
+    frames_.take(start);
+  }
 
   void evaluate(const std::vector<rod::Node> &nodes, std::vector<Vec3> &F, rod::ForceJacobian *J) override {
     near_.clear();
@@ -262,10 +277,22 @@ class ClusterContactModel : public rod::NodeForceModel {
       min_gap_ = std::min(min_gap_, h);
       if (h >= law_.h_cut) continue;
       ++contacts_;
-      const double u = dot(n, lerp(A0.v, A1.v, s) - lerp(B0.v, B1.v, t));
+      const Vec3 vrel = lerp(A0.v, A1.v, s) - lerp(B0.v, B1.v, t);
+      const double u = dot(n, vrel);
       const PairLaw pl = pair_law(A0, A1, B0, B1, w);
       const double f = pl.force(h, u);
       for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] + (w[i] * f) * n;
+      double cf = 0.0;  // friction's secant coefficient (N s/m)
+      if (mu_ > 0.0 && f > 0.0) {
+        const Vec3 vt = vrel - u * n;
+        double inv_m = 0.0;
+        for (int i = 0; i < 4; ++i) {  // (a clamped node: infinite mass)
+          const rod::Node &nd = nodes[static_cast<std::size_t>(idx[i])];
+          if (!nd.fixed) inv_m += w[i] * w[i] / nd.m;
+        }
+        cf = regularized_friction_secant(mu_, f, dot(vt, vt), inv_m, stick_, h_);
+        for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] - (w[i] * cf) * vt;
+      }
       if (!J) continue;
       rod::ForceJacobian::Coupling c;
       for (int i = 0; i < 4; ++i) {
@@ -276,6 +303,16 @@ class ClusterContactModel : public rod::NodeForceModel {
       c.dFdh = pair_law_dh(law_, pl, h, u);
       c.dFdu = pair_law_du(pl, h, u);
       J->couplings.push_back(c);
+      if (cf > 0.0) {  // friction: -cf (I - n n^T) on the relative velocity, two tangential columns
+        Vec3 t1, t2;
+        tangent_basis(n, t1, t2);
+        c.dFdh = 0.0;
+        c.dFdu = -cf;
+        c.n = t1;
+        J->couplings.push_back(c);
+        c.n = t2;
+        J->couplings.push_back(c);
+      }
     }
   }
 
@@ -357,8 +394,17 @@ class ClusterContactModel : public rod::NodeForceModel {
   struct Slide {
     Vec3 g[4];  // dh/dx of the four nodes, contact points sliding (gap_node_gradient)
   };
+  // two unit vectors that make (t1, t2, n) orthonormal (n: unit)
+  static void tangent_basis(Vec3 n, Vec3 &t1, Vec3 &t2) {
+    const Vec3 e = std::fabs(n.x) < 0.6 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+    t1 = e - dot(e, n) * n;
+    t1 = (1.0 / norm(t1)) * t1;
+    t2 = cross(n, t1);
+  }
+
   const FiberPartners &partners_;
   const ContactLaw &law_;
+  double mu_ = 0.0, stick_ = BodyContactModel::kStick, h_ = 0.0;
   SectionFrames frames_;  // the rectangles' frames at the start of the step
   std::vector<Local> local_;
   std::vector<Near> near_;

@@ -5,8 +5,9 @@
 
    The tangential force that would stop the point's tangential motion relative to the body over the
    next step (cancelling its other tangential forces) is applied if it is within mu * fn (stick),
-   else mu * fn along it (slip). Inside the implicit step (implicit_force newton) the same Coulomb
-   law acts through BodyContactModel (physics/static_bodies.h) instead. */
+   else mu * fn along it (slip). Inside the implicit step (implicit_force newton) the Coulomb law
+   acts regularised (regularized_friction_secant) through BodyContactModel (physics/static_bodies.h)
+   and ClusterContactModel (physics/fiber_partners.h) instead. */
 #ifndef FIBERFORM_PHYSICS_FRICTION_H
 #define FIBERFORM_PHYSICS_FRICTION_H
 
@@ -31,6 +32,20 @@ inline double coulomb_stick_slip(const double v[3], const double a[3], const dou
     ft2 += ft[k] * ft[k];
   }
   return ft2 > limit * limit ? limit / std::sqrt(ft2) : 1.0;
+}
+
+// Inside the implicit step (implicit_force newton): Coulomb friction regularised at the velocity
+// scale where it stops the contact point within a step. The secant coefficient (N s/m) of
+// f_t = -c v_t: c = mu f / sqrt(|v_t|^2 + v_eps^2), v_eps = mu f / c_stick, c_stick = stick m / h
+// (mu: coefficient, f: compressive normal force (N), vt2: |v_t|^2 (m^2/s^2), inv_m: the contact's
+// reduced inverse mass (1/kg), stick: the stick damping factor, h: the step (s)). A stuck point
+// creeps at |f_t| / c_stick. 0 without friction, without a compressive force or without a step.
+// Shared by the static bodies (BodyContactModel) and the fiber-fiber clusters (ClusterContactModel).
+inline double regularized_friction_secant(double mu, double f, double vt2, double inv_m, double stick, double h) {
+  if (!(mu > 0.0 && f > 0.0 && h > 0.0 && inv_m > 0.0)) return 0.0;
+  const double c_stick = stick / (inv_m * h);
+  const double v_eps = mu * f / c_stick;
+  return mu * f / std::sqrt(vt2 + v_eps * v_eps);
 }
 
 }  // namespace fiberform::physics

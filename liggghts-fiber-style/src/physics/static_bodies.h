@@ -39,6 +39,7 @@
 
 #include "contact_geometry.h"
 #include "contact_law.h"
+#include "friction.h"
 #include "implicit_rod.h"
 #include "vec3.h"
 
@@ -780,10 +781,7 @@ class BodyContactModel : public rod::NodeForceModel {
   // velocity vt, reduced inverse mass inv_m: mu f / sqrt(|vt|^2 + v_eps^2), v_eps = mu f / c_stick,
   // c_stick = stick m / dt (0 without friction or without a compressive force)
   double friction_secant(double f, Vec3 vt, double inv_m) const {
-    if (!(mu_ > 0.0 && f > 0.0 && h_ > 0.0)) return 0.0;
-    const double c_stick = stick_ / (inv_m * h_);
-    const double v_eps = mu_ * f / c_stick;
-    return mu_ * f / std::sqrt(dot(vt, vt) + v_eps * v_eps);
+    return regularized_friction_secant(mu_, f, dot(vt, vt), inv_m, stick_, h_);
   }
 
   const ContactLaw &law_;

@@ -15,6 +15,9 @@ from ..inputs import is_identifier
 
 MAX_SCENE_BYTES = 1 << 20
 
+#: json_schema_extra key of fields left out of the stage hashes at their default (quantity)
+HASHED_AT_DEFAULT = "hashed_at_default"
+
 # --------------------------------------------------------------------------------------------
 # Field helpers
 
@@ -42,9 +45,17 @@ def quantity(
     ge: float | None = None,
     lt: float | None = None,
     le: float | None = None,
+    hashed_at_default: bool = True,
 ) -> Any:
-    """A numeric field: ``meaning`` and ``unit`` go into the description (``1`` = dimensionless)."""
+    """A numeric field: ``meaning`` and ``unit`` go into the description (``1`` = dimensionless).
+
+    ``hashed_at_default=False``: the field is left out of the stage hashes while it holds its
+    default (:func:`fiberform.scene.model.section_hash`). For fields added to a section whose
+    default reproduces what the stage did before they existed: finished products stay up to date."""
     rng = _range_text(gt, ge, lt, le)
+    extra: dict[str, Any] = {"unit": unit, "meaning": meaning, "range": rng or "any"}
+    if not hashed_at_default:
+        extra[HASHED_AT_DEFAULT] = False
     return Field(
         default,
         description=f"{meaning} [{unit}]",
@@ -52,7 +63,7 @@ def quantity(
         ge=ge,
         lt=lt,
         le=le,
-        json_schema_extra={"unit": unit, "meaning": meaning, "range": rng or "any"},
+        json_schema_extra=extra,
     )
 
 

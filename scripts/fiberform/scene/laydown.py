@@ -71,13 +71,19 @@ class LaydownSection(_Section):
         "fiber/dlvo law)", "1", default=0.0,
         ge=0.0, le=10.0,
     )  # fmt: skip
+    fiber_friction_coefficient: float = quantity(
+        "Coulomb friction coefficient between fibers (keyword friction of pair_style fiber/dlvo, "
+        "regularised as on the yarns, with friction_stick; needs fiber_contact newton). 0: "
+        "frictionless, the thesis' law (sec. 2.4); > 0 departs from it (docs/models/contact.md "
+        "section 9)", "1", default=0.0, ge=0.0, le=10.0, hashed_at_default=False,
+    )  # fmt: skip
     friction_stick: float = quantity(
         "Stick damping factor k of the regularised friction inside the Newton solve (keyword "
-        "friction_stick of fix wall/fiber/yarns and fix wall/fiber/dlvo): a stuck contact point "
-        "creeps at F_t / c_stick, c_stick = k m_eff / timestep_s. Smaller is a speed option "
-        "(fewer Newton iterations, faster creep; docs/bench/laydown.md); only with yarn_contact "
-        "newton and friction_coefficient > 0", "1", default=100.0,
-        ge=1.0, le=1.0e4,
+        "friction_stick of fix wall/fiber/yarns, fix wall/fiber/dlvo and pair_style fiber/dlvo): "
+        "a stuck contact point creeps at F_t / c_stick, c_stick = k m_eff / timestep_s. Smaller is "
+        "a speed option (fewer Newton iterations, faster creep; docs/bench/laydown.md); only with "
+        "yarn_contact newton and friction_coefficient > 0, or with fiber_friction_coefficient > 0",
+        "1", default=100.0, ge=1.0, le=1.0e4,
     )  # fmt: skip
     contact_integrator: Literal["cvode", "substep"] = choice(
         "Sub-integration of each fiber-yarn and fiber-wall contact: cvode (as pair_style "
@@ -175,10 +181,15 @@ class LaydownSection(_Section):
         if self.contact_integrator == "cvode" and "contact_substeps" in self.model_fields_set:
             raise scene_problem("contact_substeps", "only used with contact_integrator substep",
                                 self.contact_substeps)
-        if "friction_stick" in self.model_fields_set and (
+        if "friction_stick" in self.model_fields_set and not self.fiber_friction_coefficient > 0.0 and (
                 self.yarn_contact_mode != "newton" or self.friction_coefficient == 0.0):
             raise scene_problem("friction_stick", "only used with yarn_contact newton and "
-                                "friction_coefficient > 0", self.friction_stick)
+                                "friction_coefficient > 0, or with fiber_friction_coefficient > 0",
+                                self.friction_stick)
+        if self.fiber_friction_coefficient > 0.0 and self.fiber_contact_mode != "newton":
+            raise scene_problem("fiber_friction_coefficient", "friction between fibers needs "
+                                "fiber_contact newton (0 with averaged)",
+                                self.fiber_friction_coefficient)
         if self.ranks > 1 and self.yarn_contact_mode != "newton":
             raise scene_problem("ranks", "more than one rank needs yarn_contact newton (the "
                                 "sub-integrated yarn contact needs both nodes of an element on one "

@@ -13,7 +13,7 @@ from typing import Any, Literal
 from pydantic import Field, ValidationError, model_validator
 
 from ..inputs import IDENTIFIER_PATTERN
-from ._fields import Identifier, RelativePath, _Section, choice, quantity, scene_problem
+from ._fields import HASHED_AT_DEFAULT, Identifier, RelativePath, _Section, choice, quantity, scene_problem
 from .common import ContactSection, DomainSection, FluidSection, RunSection
 from .fibers import FiberGenerationSection, FibersSection
 from .particles import DemoParticlesSection
@@ -179,9 +179,26 @@ SECTIONS: tuple[str, ...] = (
 )
 
 
+def _hash_neutral_defaults(section: Any, data: dict[str, Any]) -> None:
+    """Drop from a section's dumped ``data`` the fields declared ``hashed_at_default=False``
+    (:func:`._fields.quantity`) that hold their default."""
+    if not isinstance(section, _Section):
+        return
+    for name, info in type(section).model_fields.items():
+        extra = info.json_schema_extra
+        if (isinstance(extra, dict) and extra.get(HASHED_AT_DEFAULT) is False and name in data
+                and getattr(section, name) == info.default):
+            del data[name]
+
+
 def section_hash(scene: Scene, names: Iterable[str]) -> str:
-    """sha256 of the canonical JSON of the given top-level entries (sections or fields)."""
+    """sha256 of the canonical JSON of the given top-level entries (sections or fields). A field
+    declared ``hashed_at_default=False`` is left out while it holds its default, so adding such a
+    field keeps the products of earlier scenes up to date."""
     data = scene.model_dump(mode="json")
+    for n in set(names):
+        if isinstance(data.get(n), dict):
+            _hash_neutral_defaults(getattr(scene, n, None), data[n])
     picked = {n: data[n] for n in sorted(set(names))}
     text = json.dumps(picked, sort_keys=True, separators=(",", ":"))
     return "sha256:" + hashlib.sha256(text.encode()).hexdigest()

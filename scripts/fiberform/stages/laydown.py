@@ -953,7 +953,11 @@ def approximations(scene: Scene) -> list[str]:
                     "collapsed fibers (contact points moved along the line between the centre "
                     "lines to the surfaces); no self-contact; "
                     if newton else " (points 'auto' unless given; ") +
-                   "steric parameters: the style's defaults, docs/models/contact.md)")
+                   "steric parameters: the style's defaults, docs/models/contact.md; " +
+                   (f"Coulomb friction {ld.fiber_friction_coefficient:g} between fibers, "
+                    "regularised inside the Newton solve: not part of the thesis' law)"
+                    if ld.fiber_friction_coefficient > 0.0 else
+                    "frictionless, as the thesis' law)"))
     if ld.walls == "periodic":
         out.append("lateral boundaries periodic in x and y (the fabric piece of whole weave repeats; "
                    "yarns tiled over the neighbouring images); the frozen flow is the flow stage's "
