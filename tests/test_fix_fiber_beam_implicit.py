@@ -285,13 +285,15 @@ def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 velocity 0 0 1e-3 "
                         "servo 1e-6 5e-3 1 1 0 1 implicit_force newton"], "exclude each other"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 stop -1e-6"], "stop needs"),
-                      # the friction's stick factor: its range, newton mode only, not between fibers
+                      # the friction's stick factor: its range, newton mode only, with friction only
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 friction 0.5 friction_stick 0.5 "
                         "implicit_force newton"], "friction_stick must be in"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 friction 0.5 friction_stick 10 "
                         "implicit_force impulse"], "friction_stick acts inside the Newton solve only"),
                       (["pair_style fiber/dlvo implicit_force newton friction_stick 10", "pair_coeff * *"],
-                       "friction_stick acts against walls")]:
+                       "friction_stick acts with friction > 0 only"),
+                      (["pair_style fiber/dlvo integrator cvode friction 0.5", "pair_coeff * *"],
+                       "friction between fibers needs implicit_force newton")]:
         case = implicit_case([straight_chain(5, 1e-4, [1e-5, 1e-5, 0, 0])], [-1e-4] * 3, [2e-4] * 3,
                              dt=1e-6, steps=1, commands=cmds)
         with pytest.raises(RuntimeError, match=msg):
@@ -653,7 +655,8 @@ def test_fiber_friction_holds_a_fiber_on_another(fiberdem_build: Path, tmp_path:
     friction 0.5 > 0.2 it stays stuck: relative to the lower fiber it moves by less than 2 % of
     that (measured 0.29 um: the landing and the regularisation's creep; 1.4 um with the default
     stick factor 100). The lower fiber stays on its plane in both (less than 1 um; it creeps there
-    by 0.36 um under the plane's friction). The keyword is refused outside implicit_force newton."""
+    by 0.36 um under the plane's friction). (The keyword is refused outside implicit_force newton:
+    test_bad_keywords_are_errors.)"""
     dt, steps = 1e-5, 1000
     x0 = np.vstack([f.x for f in _crossing_pair(10e-6, 20e-6)])
     free = run_case(fiberdem_build, tmp_path / "free", _pair_in_cross_flow(0.0, steps, dt)).final
@@ -667,9 +670,3 @@ def test_fiber_friction_holds_a_fiber_on_another(fiberdem_build: Path, tmp_path:
     for fin in (free, held):
         assert np.abs(fin[:11, 1:4] - x0[:11]).max() < 1e-6
         assert np.all(np.isfinite(fin[:, 1:7]))
-    bad = implicit_case(_crossing_pair(10e-6, 20e-6), [-1.2e-4, -1.2e-4, -5e-6], [1.2e-4, 1.2e-4, 4e-5],
-                        dt=1e-6, steps=1,
-                        commands=["pair_style fiber/dlvo integrator cvode terms steric friction 0.5",
-                                  "pair_coeff * *"])
-    with pytest.raises(RuntimeError, match="friction between fibers needs implicit_force newton"):
-        run_case(fiberdem_build, tmp_path / "bad", bad)

@@ -59,6 +59,8 @@ void PairFiberDlvo::settings(int narg, char **arg) {
   // fiber-fiber friction acts inside the clusters' Newton solve only (ClusterContactModel)
   if (cfg.friction != 0.0 && !cfg.implicit_newton)
     error->all(FLERR, "pair_style fiber/dlvo: friction between fibers needs implicit_force newton");
+  if (cfg.friction_stick_set && !(cfg.friction > 0.0))
+    error->all(FLERR, "pair_style fiber/dlvo: friction_stick acts with friction > 0 only");
   engine_->cfg = cfg;
   // the internal step fix exists from here on (so that thermo can name f_FIBER_DLVO_STEP[i])
   if (modify->find_fix(kStepFixId) < 0) {
