@@ -231,7 +231,7 @@ def test_far_apart_fibers_give_their_exact_gap() -> None:
 @pytest.mark.parametrize("seed", [0, 1])
 def test_clearance_equals_every_pair(seed: int) -> None:
     """Element-yarn clearance: the k-d tree search equals the minimum over every element and yarn
-    segment (random fibers among random yarn polylines)."""
+    segment (random fibers among random yarn polylines); with per-node radii, the surface gap."""
     rng = np.random.default_rng(seed)
     x, offsets, _, _, _ = random_sheet(rng, 30, 8, rect=False)
     ypts = np.vstack([np.linspace(rng.uniform(0, 200e-6, 3), rng.uniform(0, 200e-6, 3), 12) for _ in range(6)])
@@ -243,6 +243,13 @@ def test_clearance_equals_every_pair(seed: int) -> None:
     sr = np.repeat(yrad, 11)
     brute = float(np.min(segment_distances(x[el][:, None], x[el + 1][:, None], sa[None], sb[None]) - sr[None]))
     assert element_clearance(x, offsets, ypts, yoff, yrad) == pytest.approx(brute, abs=1e-18)
+    # with the fibers' radii (one per fiber, very different): the surface gap, element by element,
+    # not the smallest clearance less the largest radius (the press's overlap before session 28)
+    rf = rng.uniform(2e-6, 40e-6, len(offsets) - 1)
+    rn = np.repeat(rf, np.diff(offsets))
+    brute_s = float(np.min(segment_distances(x[el][:, None], x[el + 1][:, None], sa[None], sb[None])
+                           - sr[None] - rn[el][:, None]))
+    assert element_clearance(x, offsets, ypts, yoff, yrad, rn) == pytest.approx(brute_s, abs=1e-18)
 
 
 def test_circular_fibers_give_the_same_gap_as_before() -> None:

@@ -364,12 +364,15 @@ def _growing_search(start: float, limit: float, pairs_min: Callable[[float], flo
         c = min(4.0 * c, limit)
 
 
-def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Array) -> float:
+def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Array,
+                      node_radius: Array | None = None) -> float:
     """Smallest (distance between a fiber element's centre line and a yarn segment's centre line -
     yarn radius) over all elements and yarn segments, m (< 0: a fiber centre line inside a yarn).
-    Candidate pairs from a k-d tree of the segments' midpoints (:func:`_near_pairs`), with a
-    search radius that grows until the smallest value is certain; the result equals the minimum
-    over all pairs."""
+    ``node_radius`` (one per node of ``x``, m): each element's radius (its first node's) is taken
+    off too, so the result is the smallest surface gap (< 0: a fiber reaching into a yarn by that
+    much), element by element. Candidate pairs from a k-d tree of the segments' midpoints
+    (:func:`_near_pairs`), with a search radius that grows until the smallest value is certain; the
+    result equals the minimum over all pairs."""
     ends = [(offsets[k], offsets[k + 1]) for k in range(len(offsets) - 1)]
     idx = np.concatenate([np.arange(lo, hi - 1) for lo, hi in ends if hi - lo > 1] or
                          [np.zeros(0, dtype=np.int64)]).astype(np.int64)
@@ -379,9 +382,11 @@ def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Ar
     if len(r) == 0:
         return math.inf
     pe, qe = x[idx], x[idx + 1]
+    re = np.zeros(len(idx)) if node_radius is None else np.asarray(node_radius, dtype=np.float64)[idx]
     me, ms = 0.5 * (pe + qe), 0.5 * (a + b)
     half = 0.5 * float(np.max(np.linalg.norm(qe - pe, axis=1))) + 0.5 * float(np.max(np.linalg.norm(b - a, axis=1)))
-    bound = half + float(np.max(r))  # midpoints of a pair of clearance c lie within bound + c
+    # midpoints of a pair of value c lie within bound + c
+    bound = half + float(np.max(r)) + float(np.max(re))
     allp = np.vstack([pe, qe, a, b])
     limit = float(np.linalg.norm(np.ptp(allp, axis=0))) + 1e-9
 
@@ -391,7 +396,8 @@ def element_clearance(x: Array, offsets: Array, pts: Array, offs: Array, rad: Ar
             return math.inf
         out = math.inf
         for k in np.array_split(np.arange(len(i)), max(1, len(i) // 200_000)):
-            out = min(out, float(np.min(segment_distances(pe[i[k]], qe[i[k]], a[j[k]], b[j[k]]) - r[j[k]])))
+            out = min(out, float(np.min(segment_distances(pe[i[k]], qe[i[k]], a[j[k]], b[j[k]])
+                                        - r[j[k]] - re[i[k]])))
         return out
 
     return _growing_search(max(float(np.max(r)), 1e-9), limit, pairs_min)

@@ -155,13 +155,19 @@ def plan(scene: Scene, root: Path) -> PressPlan:
     r_node = np.max(axes, axis=1)
     t_min = float(2.0 * np.min(axes))  # the thinner fiber's thickness
     yarns = read_yarns(root / FABRIC_H5)
-    # the lay-down's own overlaps (m, >= 0); the element-yarn clearance is measured from the
-    # element's centre line, so the surface overlap is the fiber radius minus the clearance
-    # (a collapsed fiber reaches a yarn at least by its half-thickness: the thinner half-axis, a
-    # lower bound of its rectangle's extent, so the guard is not widened by a1 - a2)
-    gap_ff, clear = sheet.min_fiber_fiber_gap, sheet.min_element_clearance
+    # the lay-down's own overlaps (m, >= 0): fiber-fiber from the product, fiber-yarn element by
+    # element, each element's centre-line clearance less its own fiber's radius (a collapsed
+    # fiber reaches a yarn at least by its half-thickness: the thinner half-axis, a lower bound of
+    # its rectangle's extent, so the guard is not widened by a1 - a2). (Before session 28 the
+    # largest fiber radius was taken off the smallest clearance of any element: 0.69 x thickness
+    # for the S6 sheet, whose elements reach at most 0.095 x thickness into a yarn.)
+    gap_ff = sheet.min_fiber_fiber_gap
+    period = lateral_period(scene)
+    checked = yarns if period is None else tile_yarns(yarns, period)
+    surface = element_clearance(wrap_chains(sheet.x, sheet.offsets, period), sheet.offsets, checked.points,
+                                checked.offsets, checked.radius, np.min(axes, axis=1))
     start = (max(0.0, -gap_ff) if math.isfinite(gap_ff) else 0.0,
-             max(0.0, float(np.max(np.min(axes, axis=1))) - clear) if math.isfinite(clear) else 0.0)
+             max(0.0, -surface) if math.isfinite(surface) else 0.0)
     return PressPlan(scene, float(np.max(sheet.x[:, 2] + r_node)), yarns.top, t_min, start)
 
 
@@ -329,7 +335,7 @@ class Press(Stage):
             "contact", "press")
     products = (H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME, REPORT_NAME, RESTART_NAME)
     binaries = ("fiberdem",)
-    code_version = 1
+    code_version = 2  # 2: fiber-yarn overlaps element by element (session 28)
     splits = True
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
@@ -521,11 +527,12 @@ class Press(Stage):
                                  "collapsed fibers' sections: run the press again")
             # sections: circles, or the collapsed fibers' rectangles (as the lay-down's gaps)
             ovl_fiber.append(max(0.0, -fiber_fiber_gap(x, offsets, r, axes[key], q, period)) / p.t_min)
-            # yarns: from the centre lines, less the thinner half-axis (circles: the radius; a
-            # collapsed fiber's rectangle reaches at least that far); plate: each node's extent
-            # upwards (a rectangle's in its frame, as fix wall/fiber/dlvo's plane contact)
-            clear = (element_clearance(wrap_chains(x, offsets, period), offsets, pts, offs, rad)
-                     - float(np.min(axes[key], axis=1).max()))
+            # yarns: each element's centre-line clearance less its fiber's thinner half-axis
+            # (circles: the radius; a collapsed fiber's rectangle reaches at least that far);
+            # plate: each node's extent upwards (a rectangle's in its frame, as fix
+            # wall/fiber/dlvo's plane contact)
+            clear = element_clearance(wrap_chains(x, offsets, period), offsets, pts, offs, rad,
+                                      np.min(axes[key], axis=1))
             ovl_yarn.append(max(0.0, -clear) / p.t_min)
             up_ext = r if q is None else node_extents(axes[key], q, np.array([0.0, 0.0, 1.0]))
             ovl_plate.append(max(0.0, float(np.max(x[:, 2] + up_ext - plate_z[k]))) / p.t_min)
