@@ -160,7 +160,7 @@ def plan(scene: Scene, root: Path) -> PressPlan:
     # fiber reaches a yarn at least by its half-thickness: the thinner half-axis, a lower bound of
     # its rectangle's extent, so the guard is not widened by a1 - a2). (Before session 28 the
     # largest fiber radius was taken off the smallest clearance of any element: 0.69 x thickness
-    # for the S6 sheet, whose elements reach at most 0.095 x thickness into a yarn.)
+    # for the S6 sheet, whose elements reach at most 0.076 x thickness into a yarn.)
     gap_ff = sheet.min_fiber_fiber_gap
     period = lateral_period(scene)
     checked = yarns if period is None else tile_yarns(yarns, period)
