@@ -20,6 +20,11 @@ whose fibers still migrate (slide over each other, sink into the sheet) is still
 when its height percentiles no longer move. ``--until T1`` (ms) leaves out the snapshots after T1
 (the same tables from a run that has gone on since).
 
+With ``--thickness`` a third table: per snapshot, the sheet's thickness above the fabric top as the
+lay-down stage reports it (95th percentile of the fibers' upper surfaces minus the highest yarn
+surface: fiberform.fiber_sheet.sheet_thickness_above_fabric), from the scene (``--scene``, default
+``<run>/scene.yaml``) and its output folder's ``fibers/fibers.h5`` and ``fabric/fabric.h5``.
+
     .venv/bin/python bench/laydown/motion_report.py \\
         --run runs/bench-laydown/A-rectangular-loose-r2-s1 --every 4 --top 3
     .venv/bin/python bench/laydown/motion_report.py \\
@@ -37,8 +42,10 @@ import numpy as np
 import numpy.typing as npt
 
 from fiberform.fiber_io import NODES_NAME
-from fiberform.fiber_sheet import frame_positions, mass_fraction_speed
+from fiberform.fiber_sheet import frame_fibers, frame_positions, mass_fraction_speed, sheet_thickness_above_fabric
 from fiberform.liggghts_log import Frame, read_dump
+from fiberform.products import FABRIC_H5, read_yarns
+from fiberform.scene import load_scene
 
 
 def main() -> None:
@@ -55,6 +62,10 @@ def main() -> None:
                     help="also tabulate the fibers' centre-of-mass paths from T0 (ms) to the last snapshot")
     ap.add_argument("--path-limit", type=float, default=10.0, metavar="UM",
                     help="with --paths: the mass share of fibers whose path exceeds this (um)")
+    ap.add_argument("--thickness", action="store_true",
+                    help="also tabulate the sheet's thickness above the fabric top per snapshot")
+    ap.add_argument("--scene", type=Path, default=None,
+                    help="with --thickness: the run's scene file (default <run>/scene.yaml)")
     a = ap.parse_args()
     if a.paths is not None and (a.paths < 0.0 or a.path_limit <= 0.0):
         ap.error("--paths needs T0 >= 0 ms and --path-limit > 0 um")
@@ -92,6 +103,19 @@ def main() -> None:
                   f"({v[k, 0] * 1e3:.2f}, {v[k, 1] * 1e3:.2f}, {v[k, 2] * 1e3:.2f}) mm/s | | |")
     if a.paths is not None:
         paths_table(frames, fiber_of, round(a.paths * 1e-3 / a.dt), a.top or 10, a.path_limit)
+    if a.thickness:
+        thickness_table(frames[::a.every], a.scene or a.run / "scene.yaml", a.dt)
+
+
+def thickness_table(frames: list[Frame], scene_path: Path, dt: float) -> None:
+    """Per snapshot: the thickness above the fabric top (um), the lay-down stage's measure."""
+    scene = load_scene(scene_path)
+    top = read_yarns(scene.output_path / FABRIC_H5).top
+    print("\n| t (ms) | thickness above the fabric top (um) |\n|---|---|")
+    for fr in frames:
+        x, present, offsets = frame_fibers(fr.columns)
+        above = sheet_thickness_above_fabric(scene, x, offsets, present, top)
+        print(f"| {fr.step * dt * 1e3:.1f} | {above * 1e6:.1f} |")
 
 
 def fiber_means(fr: Frame, fiber_of: dict[int, tuple[int, int]], values: npt.NDArray[np.float64]
