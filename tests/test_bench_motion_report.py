@@ -74,3 +74,41 @@ def test_motion_report_paths(tmp_path: Path) -> None:
     bad = subprocess.run([sys.executable, str(ROOT / "bench" / "laydown" / "motion_report.py"), "--run",
                           str(tmp_path), "--paths", "-1"], capture_output=True, text=True)
     assert bad.returncode == 2 and "--paths" in bad.stderr
+
+
+def test_motion_report_thickness(tmp_path: Path) -> None:
+    """--thickness: the stage's thickness above the fabric top (95th percentile of the fibers'
+    upper surfaces minus the highest yarn surface). One yarn of radius 50 um along x at z = 0 (top
+    50 um); fiber 1 (radius 10 um) at z = 100 um, fiber 2 at 200 um: upper surfaces 110, 110, 210,
+    210 um, whose 95th percentile (linear) is 210 um: 160.0 um above the fabric."""
+    import h5py
+    import numpy as np
+
+    out_dir = tmp_path / "out"
+    (out_dir / "fibers").mkdir(parents=True)
+    (out_dir / "fabric").mkdir(parents=True)
+    with h5py.File(out_dir / "fibers" / "fibers.h5", "w") as f:
+        f["fibers/offsets"] = np.array([0, 2, 4])
+        f["fibers/radii"] = np.full((4, 4), 10e-6)
+    with h5py.File(out_dir / "fabric" / "fabric.h5", "w") as f:
+        f["yarns/points"] = np.array([[0.0, 0.0, 0.0], [1e-3, 0.0, 0.0]])
+        f["yarns/offsets"] = np.array([0, 2])
+        f["yarns/radius"] = np.array([50e-6])
+    (tmp_path / "scene.yaml").write_text(
+        "name: t\noutput_dir: out\nrun:\n  timestep_s: 1.0e-6\n  duration_s: 1.0e-3\n"
+        "fibers:\n  count: 2\n  length_m: 1.0e-4\n  width_m: 2.0e-5\n  segments: 1\n"
+        "  youngs_modulus_Pa: 1.0e10\n  shear_modulus_Pa: 4.0e9\n")
+    work = tmp_path / "laydown" / "work"
+    work.mkdir(parents=True)
+    (work / "fibers.nodes").write_text("".join(
+        f"{a} {f} {k} 2 1e-5 1e-5 0 0 0 0 0 1 0 0 0\n" for a, f, k in ((1, 1, 0), (2, 1, 1), (3, 2, 0), (4, 2, 1))))
+    rows = ["1 1 0 0 1e-4 0 0 0 1 0", "2 1 1e-4 0 1e-4 0 0 0 1 1",
+            "3 1 0 1e-4 2e-4 0 0 0 2 0", "4 1 1e-4 1e-4 2e-4 0 0 0 2 1"]
+    (work / "traj.dump").write_text(
+        "ITEM: TIMESTEP\n1000\nITEM: NUMBER OF ATOMS\n4\nITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\n"
+        "ITEM: ATOMS id mass x y z vx vy vz f_beam[1] f_beam[2]\n" + "\n".join(rows) + "\n")
+    # (the scene's output_dir is relative to the working directory)
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "laydown" / "motion_report.py"), "--run",
+                          str(tmp_path), "--thickness"], capture_output=True, text=True, check=True,
+                         cwd=tmp_path).stdout
+    assert "| 1.0 | 160.0 |" in out, out
