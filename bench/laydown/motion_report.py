@@ -42,7 +42,9 @@ import numpy as np
 import numpy.typing as npt
 
 from fiberform.fiber_io import NODES_NAME
-from fiberform.fiber_sheet import frame_fibers, frame_positions, mass_fraction_speed, sheet_thickness_above_fabric
+from fiberform.fiber_sheet import (
+    frame_fibers, frame_positions, mass_fraction_speed, sheet_thickness_above_fabric,
+)
 from fiberform.liggghts_log import Frame, read_dump
 from fiberform.products import FABRIC_H5, read_yarns
 from fiberform.scene import load_scene
