@@ -37,6 +37,18 @@ namespace {
 using fiberform::testing::Fiber;
 using fiberform::testing::make_fiber;
 
+// The fibers' nodes one after the other in one node vector, as a cluster's (Node::next false at each
+// fiber's last node), and the fibers' first nodes plus the end (off).
+void cluster_nodes(const std::vector<Fiber *> &fibers, std::vector<rod::Node> &all, std::vector<int> &off) {
+  all.clear();
+  off = {0};
+  for (const Fiber *f : fibers) {
+    all.insert(all.end(), f->nodes.begin(), f->nodes.end());
+    all.back().next = false;
+    off.push_back(static_cast<int>(all.size()));
+  }
+}
+
 // All fibers advanced by one step, cluster by cluster (what fix fiber/beam does on one rank).
 struct Sim {
   std::vector<Fiber *> fibers;
@@ -163,16 +175,7 @@ void test_stack(double h, double v0, double T = 0.02, bool ribbons = false, std:
   bool ok = true;
   std::vector<rod::Node> all;
   std::vector<int> ids{0, 1, 2}, off;
-  auto gather = [&]() {
-    all.clear();
-    off.clear();
-    for (Fiber *f : sim.fibers) {
-      off.push_back(static_cast<int>(all.size()));
-      all.insert(all.end(), f->nodes.begin(), f->nodes.end());
-      all.back().next = false;
-    }
-    off.push_back(static_cast<int>(all.size()));
-  };
+  auto gather = [&]() { cluster_nodes(sim.fibers, all, off); };
   for (int s = 0; s < steps && ok; ++s) {
     ok = sim.step(h, g);
     gather();
@@ -352,12 +355,7 @@ void test_friction(double h, double phi) {
   // action = reaction: the model's forces (normal and friction) sum to zero over the cluster
   std::vector<rod::Node> all;
   std::vector<int> ids{0, 1, 2}, off;
-  for (Fiber *f : sim.fibers) {
-    off.push_back(static_cast<int>(all.size()));
-    all.insert(all.end(), f->nodes.begin(), f->nodes.end());
-    all.back().next = false;
-  }
-  off.push_back(static_cast<int>(all.size()));
+  cluster_nodes(sim.fibers, all, off);
   between.begin_cluster(ids, off);
   between.begin_step(all, 0.0, h);
   std::vector<Vec3> Fc(all.size());
@@ -436,13 +434,7 @@ void test_rect_limiter_prediction() {
     partners.add_fiber(0, points(A));
     partners.add_fiber(1, points(B));
     partners.build({-1e-3, -1e-3, -1e-3}, {1e-3, 1e-3, 1e-3}, 30e-6);
-    all.clear();
-    off = {0};
-    for (Fiber *f : {&A, &B}) {
-      all.insert(all.end(), f->nodes.begin(), f->nodes.end());
-      all.back().next = false;
-      off.push_back(static_cast<int>(all.size()));
-    }
+    cluster_nodes({&A, &B}, all, off);
     between.begin_cluster(ids, off);
     between.begin_step(all, 0.0, 1e-6);
   };
