@@ -166,9 +166,7 @@ def write_yarns(path: Path, fabric_h5: Path, period: tuple[float, float] | None 
     the yarns written: those of fabric.h5 (products.read_yarns) or, with ``period`` (Lx, Ly) in m
     (:func:`lateral_period`), the yarns tiled over the periodic box and its neighbours
     (:func:`tile_yarns`)."""
-    yarns = read_yarns(fabric_h5)
-    if period is not None:
-        yarns = tile_yarns(yarns, period)
+    yarns = contact_yarns(read_yarns(fabric_h5), period)
     pts, offs, rad = yarns.points, yarns.offsets, yarns.radius
     with open(path, "w") as fh:
         fh.write("# yarn-index x y z radius (m), from fabric.h5 /yarns"
@@ -177,6 +175,13 @@ def write_yarns(path: Path, fabric_h5: Path, period: tuple[float, float] | None 
             for p in pts[offs[k]:offs[k + 1]]:
                 fh.write(f"{k} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} {float(rad[k])!r}\n")
     return yarns
+
+
+def contact_yarns(yarns: Yarns, period: tuple[float, float] | None) -> Yarns:
+    """The yarns as fix wall/fiber/yarns has them (:func:`write_yarns`): ``yarns`` themselves, or
+    with ``period`` (Lx, Ly; :func:`lateral_period`) tiled over the periodic box and its neighbours
+    (:func:`tile_yarns`)."""
+    return yarns if period is None else tile_yarns(yarns, period)
 
 
 def tile_yarns(yarns: Yarns, period: tuple[float, float]) -> Yarns:

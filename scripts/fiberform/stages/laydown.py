@@ -46,10 +46,10 @@ from ..fiber_io import (
     NODES_NAME, fiber_preamble, fibers_in_nodes, laydown_beam_options, outer_half_axes, write_nodes_subset,
 )
 from ..fiber_sheet import (
-    contact_commands, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
+    contact_commands, contact_yarns, element_clearance, fiber_com_speeds, fiber_fiber_gap, frame_fibers,
     frame_positions, frame_quaternions, lateral_period, mass_fraction_speed, node_dump_columns,
     pair_options, product_thickness_above_fabric,
-    sheet_thickness, sheet_thickness_above_fabric, tile_yarns, wrap_chains, wrap_points,
+    sheet_thickness, sheet_thickness_above_fabric, wrap_chains, wrap_points,
     write_sheet_png, write_sheet_vtu, write_yarns, yarn_distances,
 )
 from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_file_token
@@ -402,7 +402,7 @@ class Laydown(Stage):
         # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns had them, with
         # the nodes (elements: the chains) wrapped into the box
         period = lateral_period(scene)
-        checked = yarns if period is None else tile_yarns(yarns, period)
+        checked = contact_yarns(yarns, period)
         pts, offs, rad = checked.points, checked.offsets, checked.radius
         with h5py.File(paths["fibers_h5"], "r") as fh:
             f_off = np.asarray(fh["fibers/offsets"][...], dtype=np.int64)
