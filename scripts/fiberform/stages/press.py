@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import math
 import shutil
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from functools import cached_property
 from pathlib import Path
 
 import h5py
@@ -39,10 +40,10 @@ import numpy as np
 from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, laydown_beam_options, write_nodes_subset
 from ..fiber_sheet import (
-    YARNS_FIX, Array, contact_commands, contact_integrator_words, element_clearance, fiber_fiber_gap,
-    frame_fibers, frame_quaternions, lateral_period, node_dump_columns, node_extents,
+    YARNS_FIX, Array, contact_commands, contact_integrator_words, contact_yarns, element_clearance,
+    fiber_fiber_gap, frame_fibers, frame_quaternions, lateral_period, node_dump_columns, node_extents,
     product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric,
-    solid_fraction_profile, static_force_refs, tile_yarns, wrap_chains, write_sheet_png,
+    solid_fraction_profile, static_force_refs, wrap_chains, write_sheet_png,
     write_sheet_vtu, write_yarns,
 )
 from ..inputs import (
@@ -87,7 +88,8 @@ class PressPlan:
     """The numbers of one press run, from the scene and the lay-down's sheet."""
 
     def __init__(self, scene: Scene, sheet_top: float, fabric_top: float, t_min: float,
-                 start_overlap: tuple[float, float] = (0.0, 0.0)) -> None:
+                 start_overlap: tuple[float, float] | Callable[[], tuple[float, float]] = (0.0, 0.0)
+                 ) -> None:
         pr, ld, dom = scene.press, scene.laydown, scene.domain
         assert pr is not None and ld is not None and dom is not None
         self.dt = pr.timestep_s if pr.timestep_s is not None else ld.timestep_s
@@ -97,13 +99,9 @@ class PressPlan:
         self.area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
         self.centre = (0.5 * (dom.lo_m[0] + dom.hi_m[0]), 0.5 * (dom.lo_m[1] + dom.hi_m[1]))
         self.t_min = t_min
-        # the overlaps the lay-down left (m, >= 0): fiber-fiber (averaged contact lets fibers
-        # pass through each other) and fiber-yarn; the guard ends the run when the press adds
-        # more than overlap_limit x the thinner fiber's thickness to either
-        self.start_overlap_fiber, self.start_overlap_yarn = start_overlap
+        # the overlaps the lay-down left (start_overlaps), or how to measure them when first asked
+        self._start_overlap = start_overlap
         self.guard = pr.overlap_limit * t_min
-        self.guard_fiber = self.start_overlap_fiber + self.guard
-        self.guard_yarn = self.start_overlap_yarn + self.guard
         if pr.mode == "velocity":
             assert pr.target_thickness_m is not None
             travel = self.z0 - (fabric_top + pr.target_thickness_m)
@@ -145,6 +143,33 @@ class PressPlan:
             raise SceneError("press", ["press: more than 1e8 steps (timestep_s too small for the "
                                        "press's duration)"])
 
+    @cached_property
+    def start_overlaps(self) -> tuple[float, float]:
+        """The overlaps the lay-down left (m, >= 0): fiber-fiber (averaged contact lets fibers pass
+        through each other) and fiber-yarn; measured on first use (:func:`plan`: the yarn part
+        visits every element, about a second for a case-C sheet), so the stage's scene check and
+        progress do not pay for it."""
+        s = self._start_overlap
+        return s() if callable(s) else s
+
+    @property
+    def start_overlap_fiber(self) -> float:
+        return self.start_overlaps[0]
+
+    @property
+    def start_overlap_yarn(self) -> float:
+        return self.start_overlaps[1]
+
+    # the guard ends the run when the press adds more than overlap_limit x the thinner fiber's
+    # thickness to either overlap
+    @property
+    def guard_fiber(self) -> float:
+        return self.start_overlap_fiber + self.guard
+
+    @property
+    def guard_yarn(self) -> float:
+        return self.start_overlap_yarn + self.guard
+
 
 def plan(scene: Scene, root: Path) -> PressPlan:
     """The press plan of a scene whose lay-down products are under ``root`` (the output folder)."""
@@ -161,13 +186,15 @@ def plan(scene: Scene, root: Path) -> PressPlan:
     # its rectangle's extent, so the guard is not widened by a1 - a2). (Before session 28 the
     # largest fiber radius was taken off the smallest clearance of any element: 0.69 x thickness
     # for the S6 sheet, whose elements reach at most 0.076 x thickness into a yarn.)
-    gap_ff = sheet.min_fiber_fiber_gap
-    period = lateral_period(scene)
-    checked = yarns if period is None else tile_yarns(yarns, period)
-    surface = element_clearance(wrap_chains(sheet.x, sheet.offsets, period), sheet.offsets, checked.points,
-                                checked.offsets, checked.radius, np.min(axes, axis=1))
-    start = (max(0.0, -gap_ff) if math.isfinite(gap_ff) else 0.0,
-             max(0.0, -surface) if math.isfinite(surface) else 0.0)
+    def start() -> tuple[float, float]:
+        gap_ff = sheet.min_fiber_fiber_gap
+        period = lateral_period(scene)
+        checked = contact_yarns(yarns, period)
+        surface = element_clearance(wrap_chains(sheet.x, sheet.offsets, period), sheet.offsets, checked.points,
+                                    checked.offsets, checked.radius, np.min(axes, axis=1))
+        return (max(0.0, -gap_ff) if math.isfinite(gap_ff) else 0.0,
+                max(0.0, -surface) if math.isfinite(surface) else 0.0)
+
     return PressPlan(scene, float(np.max(sheet.x[:, 2] + r_node)), yarns.top, t_min, start)
 
 
@@ -466,7 +493,7 @@ class Press(Stage):
         # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns has them, with
         # each chain shifted so its first node lies in the box, fiber pairs by closest images
         period = lateral_period(scene)
-        checked = yarns if period is None else tile_yarns(yarns, period)
+        checked = contact_yarns(yarns, period)
         pts, offs, rad = checked.points, checked.offsets, checked.radius
         rows = np.array(thermo_rows(log_text), dtype=float)
         if rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
