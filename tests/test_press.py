@@ -234,6 +234,8 @@ def test_overlap_action_stop_keeps_the_sheet_where_the_guard_trips(sheet: Path, 
     ("{mode: pressure}", "target_pressure_Pa"),
     ("{mode: velocity, target_thickness_m: 1.0e-5, target_pressure_Pa: 10.0}", "target_pressure_Pa"),
     ("{mode: pressure, target_pressure_Pa: 10.0, overlap_limit: 0.0}", "overlap_limit"),
+    ("{mode: pressure, target_pressure_Pa: 10.0, output_interval_s: 1.0e-4, restart_interval_s: 5.0e-5}",
+     "restart_interval_s"),
 ])
 def test_bad_press_section_exits_2(sheet: Path, fiberform_cmd: list[str], build_dir: Path,
                                    press: str, field: str) -> None:
@@ -274,6 +276,81 @@ def test_one_and_two_ranks_press_the_same_sheet(sheet: Path, fiberform_cmd: list
     scale = max(1e-12, float(np.max(np.abs(f1))))
     assert np.max(np.abs(f1 - f2)) <= 1e-6 * scale, (np.max(np.abs(f1 - f2)), scale)
     assert math.isfinite(scale)
+
+
+@pytest.mark.parametrize("mode", ["velocity", "pressure"])
+def test_killed_press_resumes_to_the_same_sheet(sheet: Path, fiberform_cmd: list[str], build_dir: Path,
+                                                mode: str) -> None:
+    """Restart files every 2 output intervals (press.<step>.restart); a press killed (SIGKILL to its
+    process group) late in its run and continued with ``--resume`` ends as the uninterrupted one.
+
+    Velocity mode resumes from its last complete restart file: the same curve points, plate heights
+    (to 1e-12 m), pressures (1e-6 of the largest) and pressed sheet (1e-9 m; measured 3e-11 m: not
+    bit for bit, the contact lists are rebuilt after read_restart, docs/stages/press.md). Pressure mode resumes only from a restart file
+    before the servo took over (its state is not in the file), or starts over; the replayed
+    approach equals the uninterrupted one to round-off (nodes 1e-12 m, measured 8e-14 m at the
+    servo's start), the servo starts at the same height; after that the servo's contact feedback
+    amplifies the round-off (measured: 2e-9 m of plate height, 0.085 Pa at a 0.17 Pa point), so its
+    pressures are held to the servo's own resolution, its proportional band (0.2 Pa here)."""
+    from cli_helpers import terminate_when
+    from fiberform.liggghts_log import read_dump
+
+    top, fab = _sheet_top(sheet), _fabric_top(sheet)
+    press = (f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {0.5 * (top - fab)!r}, "
+             "hold_time_s: 5.0e-4, output_interval_s: 1.0e-4, restart_interval_s: 2.0e-4}"
+             if mode == "velocity" else
+             "{mode: pressure, target_pressure_Pa: 2.0, pressure_rate_Pa_s: 4.0e+3, hold_time_s: 4.0e-4, "
+             "release_time_s: 3.0e-4, plate_speed_m_s: 0.02, output_interval_s: 1.0e-4, restart_interval_s: 2.0e-4}")
+    out = sheet / "runs" / NAME / "press"
+
+    def result() -> dict[str, np.ndarray]:
+        with h5py.File(out / "press.h5", "r") as h:
+            a = h["run"].attrs
+            got = {"x": h["sheet/x"][...], "id": h["sheet/fiber_id"][...], "step": h["curve/step"][...],
+                   "z": h["curve/plate_z"][...], "p": h["curve/pressure"][...],
+                   "resumed": np.array(a["resumed_from_step"]),
+                   "servo": np.array([a.get("servo_start_time_s", np.nan), a.get("servo_start_z_m", np.nan)])}
+        frames = {fr.step: fr for fr in read_dump(out / "work" / "traj.dump")}
+        got.update({f"nodes{st}": np.stack([fr.columns[c] for c in "xyz"], 1) for st, fr in frames.items()})
+        return got
+
+    proc = _press(sheet, fiberform_cmd, build_dir, press, f"resume_{mode}")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    ref = result()
+    assert int(ref["resumed"]) == -1
+    steps = sorted(int(p.name.split(".")[1]) for p in (out / "work").glob("press.*.restart"))
+    assert steps and all(s % 200 == 0 for s in steps) and steps[-1] >= 1000, steps
+    last = steps[-1]
+    shutil.rmtree(out)
+    rc = terminate_when([*fiberform_cmd, "press", f"resume_{mode}.yaml", "--build-dir", str(build_dir)],
+                        sheet, out / "work" / f"press.{last}.restart", timeout_s=600, kill_group=True)
+    assert rc != 0 and not (out / "press.h5").exists()
+    res = _cli(fiberform_cmd, ["press", f"resume_{mode}.yaml", "--resume", "--build-dir", str(build_dir)], sheet)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
+    got = result()
+    start = int(got["resumed"])
+    assert np.array_equal(got["step"], ref["step"]), "curve points repeated, lost or out of order"
+    assert np.array_equal(got["id"], ref["id"])
+    if mode == "velocity":
+        assert start >= last - 200 and start % 200 == 0, (start, last)  # its last complete one
+        assert np.max(np.abs(got["z"] - ref["z"])) < 1e-12, np.max(np.abs(got["z"] - ref["z"]))
+        assert np.max(np.abs(got["x"] - ref["x"])) < 1e-9, np.max(np.abs(got["x"] - ref["x"]))
+        scale = max(1e-12, float(np.max(np.abs(ref["p"]))))
+        assert np.max(np.abs(got["p"] - ref["p"])) <= 1e-6 * scale, (np.max(np.abs(got["p"] - ref["p"])), scale)
+        return
+    servo_step = round(float(ref["servo"][0]) / 1e-6)  # laydown.timestep_s 1e-6
+    # the last restart file before the servo took over (none: it starts over)
+    before = (servo_step - 1) // 200 * 200
+    assert start == (before if before > 0 else -1), (start, servo_step)
+    assert abs(float(got["servo"][0]) - float(ref["servo"][0])) < 1e-12
+    assert abs(float(got["servo"][1]) - float(ref["servo"][1])) < 1e-12, (got["servo"], ref["servo"])
+    approach = ref["step"] <= servo_step
+    assert np.max(np.abs(got["z"][approach] - ref["z"][approach])) < 1e-12
+    for st in ref["step"][approach]:
+        d = np.max(np.abs(got[f"nodes{st}"] - ref[f"nodes{st}"]))
+        assert d < 1e-12, (st, d)
+    band = 0.1 * 2.0  # servo_band_Pa's default, 0.1 x target_pressure_Pa
+    assert np.max(np.abs(got["p"] - ref["p"])) < band, np.c_[ref["step"], got["p"], ref["p"]]
 
 
 def test_permeability_after_the_press_reads_the_pressed_sheet(sheet: Path, fiberform_cmd: list[str],

@@ -206,6 +206,7 @@ PRESS_ALTERNATIVES: dict[str, tuple[str, object]] = {
     "overlap_limit": ("pressure", 0.3),
     "overlap_action": ("velocity", "stop"),
     "ranks": ("pressure", 2),
+    "restart_interval_s": ("velocity", 4.0e-4),
 }
 
 

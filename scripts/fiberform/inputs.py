@@ -193,10 +193,18 @@ def var_value(name: str) -> Token:
     return Token("${" + fmt_ident(name) + "}", _TOKEN_KEY)
 
 
-def fix_affine(fix_id: str, index: int, scale: float, offset: float) -> Token:
+def fix_affine(fix_id: str, index: int, scale: float, offset: float | Token) -> Token:
     """``OFFSET+SCALE*f_ID[n]``, an equal-style variable's formula (a fix value in other units or
-    from another origin, e.g. a plate's height from its displacement)."""
-    return Token(fmt_float(offset) + "+" + fmt_float(scale) + "*" + fix_ref(fix_id, index).text, _TOKEN_KEY)
+    from another origin, e.g. a plate's height from its displacement); the offset a number or a
+    token of this module (e.g. :func:`var_value`, a variable's value when the command is read)."""
+    off = offset.text if isinstance(offset, Token) else fmt_float(offset)
+    return Token(off + "+" + fmt_float(scale) + "*" + fix_ref(fix_id, index).text, _TOKEN_KEY)
+
+
+def var_affine(name: str, scale: float, offset: float) -> Token:
+    """``OFFSET+SCALE*v_NAME``, an equal-style variable's formula (another variable's value from
+    another origin or in other units)."""
+    return Token(fmt_float(offset) + "+" + fmt_float(scale) + "*" + var_ref(name).text, _TOKEN_KEY)
 
 
 def var_distance(name: str, value: float) -> Token:

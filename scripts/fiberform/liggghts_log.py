@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from .errors import StageError
 
-__all__ = ["Frame", "read_dump", "run_loop_times", "thermo_rows", "total_wall_time"]
+__all__ = ["Frame", "log_up_to_step", "read_dump", "run_loop_times", "thermo_rows", "total_wall_time"]
 
 
 def total_wall_time(log: str) -> float:
@@ -45,7 +45,7 @@ def _thermo_tables(log: str) -> list[tuple[list[list[float]], str | None]]:
             tables.append((rows, line))
             rows = None
             continue
-        if rows is not None:
+        if rows is not None and words:  # (blank lines: a resumed run's log after a killed part's)
             try:
                 rows.append([float(w) for w in words])
             except ValueError:
@@ -79,6 +79,33 @@ def thermo_rows(log: str) -> list[list[float]]:
     are not all numbers (warnings, memory lines) are skipped. LIGGGHTS abbreviates long column
     names in the header, so callers name the columns themselves from their input script."""
     return [row for rows, _ in _thermo_tables(log) for row in rows]
+
+
+def log_up_to_step(log: str, step: int) -> str:
+    """The text of a LIGGGHTS log up to and including the last thermo row of a step <= ``step``
+    (what a run resumed from the restart file of ``step`` keeps of a killed part: the lines after
+    that row belong to steps it repeats); "" when there is no such row. Rows as thermo_rows reads
+    them: the all-number lines after a ``Step`` header, before its ``Loop time``."""
+    lines = log.splitlines(keepends=True)
+    end, in_table = 0, False
+    for k, line in enumerate(lines):
+        words = line.split()
+        if words[:1] == ["Step"]:
+            in_table = True
+            continue
+        if line.startswith("Loop time"):
+            in_table = False
+            continue
+        if not in_table or not words:
+            continue
+        try:
+            row = [float(w) for w in words]
+        except ValueError:
+            continue
+        if row[0] > step:
+            break
+        end = k + 1
+    return "".join(lines[:end])
 
 
 @dataclass(frozen=True)

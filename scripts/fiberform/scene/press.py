@@ -78,6 +78,11 @@ class PressSection(_Section):
         "could not be pressed to the experimental thickness, so their pressing was stopped earlier)",
         default="fail",
     )
+    restart_interval_s: float = quantity(
+        "Simulated time between LIGGGHTS restart files of the press (rounded to whole "
+        "output_interval_s; `fiberform press SCENE --resume` continues a killed press from the last "
+        "one; 0: none)", "s", default=1.0e-3, ge=0.0, le=1e3, hashed_at_default=False,
+    )  # fmt: skip
     ranks: int = quantity(
         "MPI ranks of the press (> 1 needs laydown.yarn_contact newton)", "1", default=1, ge=1,
         le=100000,
@@ -85,6 +90,9 @@ class PressSection(_Section):
 
     @model_validator(mode="after")
     def _check(self) -> PressSection:
+        if 0.0 < self.restart_interval_s < self.output_interval_s:
+            raise scene_problem("restart_interval_s", "must be 0 or at least output_interval_s",
+                                self.restart_interval_s)
         if self.mode == "velocity":
             if self.target_thickness_m is None:
                 raise scene_problem("target_thickness_m", "required with mode velocity", None)

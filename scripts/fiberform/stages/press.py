@@ -21,6 +21,12 @@ At every ``output_interval_s``: a snapshot of the nodes, the plate's position an
 overlap guard (the run ends when an element overlaps another fiber, a yarn or the plate by more
 than ``overlap_limit`` x the thinner fiber's thickness; the stage then fails with exit status 1).
 
+fiberdem writes restart files ``press.<step>.restart`` every ``restart_interval_s`` (whole output
+intervals); ``fiberform press SCENE --resume`` continues a killed press from the last complete one
+(fiberform.liggghts_restart): the plate is set again where the uninterrupted run had it (velocity
+mode, and the pressure mode's approach; the servo's state is not in the restart file, so a
+pressure-mode press resumes from a restart file before the servo took over, else it starts over).
+
 Products in ``<output_dir>/press/``: ``press.h5`` (curve, profiles, final sheet, provenance),
 ``sheet.vtu``, ``press.png``, ``curve.png``, ``report.md``, ``sheet.restart`` (the pressed state).
 Page: docs/stages/press.md.
@@ -48,14 +54,18 @@ from ..fiber_sheet import (
 )
 from ..inputs import (
     LiggghtsInput, Token, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
-    print_values, var_distance, var_ref, var_value,
+    print_values, step_file_token, var_affine, var_distance, var_ref, var_value,
 )
-from ..liggghts_log import read_dump, thermo_rows, total_wall_time
+from ..liggghts_log import log_up_to_step, read_dump, thermo_rows, total_wall_time
+from ..liggghts_restart import (
+    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, restart_name, restart_steps,
+    resume_point, start_fresh,
+)
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
     read_sheet, read_yarns,
 )
-from ..provenance import file_hash, text_hash, write_dataset
+from ..provenance import atomic_write_text, file_hash, text_hash, write_dataset
 from ..runner import liggghts_progress
 from ..scene import FluidSection, PressSection, Scene
 from ._stage import Program, Stage, StageContext
@@ -66,6 +76,7 @@ H5_NAME, VTU_NAME, PNG_NAME, CURVE_NAME = "press.h5", "sheet.vtu", "press.png", 
 REPORT_NAME, RESTART_NAME = "report.md", "sheet.restart"
 INPUT_NAME, LOG_NAME, TRAJ_NAME, YARNS_NAME = "in.press", "log.fiberdem", "traj.dump", "yarns.txt"
 START_NAME = "laydown.restart"
+RESTART_STEM = "press"  # restart files press.<step>.restart
 END_LABEL, GUARD_MARKER = "press_end", "FIBERFORM_OVERLAP"
 #: pressure mode: the end of the approach (label), the log lines of its end (the contact pressure
 #: reached) and of the servo's start (step, plate height)
@@ -94,6 +105,11 @@ class PressPlan:
         assert pr is not None and ld is not None and dom is not None
         self.dt = pr.timestep_s if pr.timestep_s is not None else ld.timestep_s
         self.every = max(1, round(pr.output_interval_s / self.dt))
+        # steps between restart files (whole output intervals: a resume starts at a snapshot and a
+        # chunk's end); 0: none
+        self.restart_every = (self.every * max(1, round(pr.restart_interval_s / pr.output_interval_s))
+                              if pr.restart_interval_s > 0.0 else 0)
+        self.plate_speed = pr.plate_speed_m_s
         self.z0 = sheet_top + pr.plate_start_gap_m
         self.fabric_top = fabric_top
         self.area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
@@ -139,9 +155,19 @@ class PressPlan:
             self.z_end = math.nan
             total = self.approach_steps + self.move_steps
         self.total_steps = total
+        self.mode = pr.mode
         if total > 10**8:
             raise SceneError("press", ["press: more than 1e8 steps (timestep_s too small for the "
                                        "press's duration)"])
+
+    def plate_height(self, step: int) -> float:
+        """Where the uninterrupted press has its plate at ``step`` (m) of the velocity mode, or of
+        the pressure mode's approach (the plate never passes the fabric top; in pressure mode the
+        servo takes over at step approach_steps at the latest)."""
+        if self.mode == "velocity":
+            return self.z0 - self.speed * step * self.dt if step <= self.move_steps else self.z_end
+        assert step <= self.approach_steps, (step, self.approach_steps)
+        return max(self.fabric_top, self.z0 - self.plate_speed * step * self.dt)
 
     @cached_property
     def start_overlaps(self) -> tuple[float, float]:
@@ -198,16 +224,25 @@ def plan(scene: Scene, root: Path) -> PressPlan:
     return PressPlan(scene, float(np.max(sheet.x[:, 2] + r_node)), yarns.top, t_min, start)
 
 
-def build_input(scene: Scene, p: PressPlan) -> str:
+def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> str:
     """The press's LIGGGHTS input (files in the working folder: laydown.restart, fibers.nodes,
-    yarns.txt). Every field of the press section acts through here or through PressPlan."""
+    yarns.txt). Every field of the press section acts through here or through PressPlan.
+    ``resume_step``: continue a killed press from its restart file of that step (a whole number of
+    output intervals; pressure mode: before the servo took over), the plate where the
+    uninterrupted run had it (:meth:`PressPlan.plate_height`)."""
+    k0 = 0 if resume_step is None else int(resume_step)  # the step the run starts from
+    if k0 % p.every or not 0 <= k0 < p.total_steps or (p.mode == "pressure" and k0 >= p.approach_steps):
+        raise StageError(f"press: cannot resume from step {k0} (whole output intervals of {p.every} "
+                         f"steps before the end, {p.total_steps}; pressure mode: before the servo, "
+                         f"{p.approach_steps})")
     f, ld, pr = scene.fibers, scene.laydown, scene.press
     assert f is not None and ld is not None and pr is not None
     fl = scene.fluid or FluidSection()
     s = LiggghtsInput()
     s.comment("Generated by fiberform stage press (docs/stages/press.md).")
     fiber_preamble(s, f, scene.contact is not None,
-                   *laydown_beam_options(ld), restart=file_token(START_NAME),
+                   *laydown_beam_options(ld),
+                   restart=file_token(START_NAME if resume_step is None else restart_name(RESTART_STEM, k0)),
                    flat_decomposition=True)
     # quiescent water (thesis sec. 3.5): drag against water at rest, gravity and buoyancy
     s.command("fix", "drag", "all", "fiber/drag", "flow", "uniform", 0.0, 0.0, 0.0,
@@ -229,12 +264,20 @@ def build_input(scene: Scene, p: PressPlan) -> str:
     columns, dump_fmt = node_dump_columns(f, lateral_period(scene) is not None)
     s.command("dump", "traj", "all", "custom", p.every, file_token(TRAJ_NAME), *columns)
     s.command("dump_modify", "traj", "sort", "id", "format", dump_fmt)
+    if resume_step is not None:
+        # the snapshots before the restart are kept in traj.dump (the stage cut it there)
+        s.command("dump_modify", "traj", "append", "yes")
     s.command("thermo_modify", "lost", "ignore", "flush", "yes")  # flush: the log follows the run
+    if p.restart_every:
+        s.command("restart", p.restart_every, step_file_token(RESTART_STEM, RESTART_EXT))
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
     plate_words: list[object] = ["terms", ident_list(ld.terms)] + (
         ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
         else contact_integrator_words(ld))
     cx, cy = p.centre
+    # the thermo's: the plate's displacement down since the press's start (m; its 8 printed digits
+    # resolve the travel, where the height's would not), from plate_z (each plate fix defines it)
+    s.command("variable", "press_disp", "equal", var_affine("plate_z", -1.0, p.z0))
 
     def plate(z: float | Token, *motion: object, stop: float | Token | None = None) -> None:
         # stop: the plate never passes the fabric top (it would rest on the yarn knuckles); a z
@@ -244,15 +287,18 @@ def build_input(scene: Scene, p: PressPlan) -> str:
             stop = max(0.0, z - p.fabric_top)
         s.command("fix", "plate", "all", "wall/fiber/dlvo", "plane", cx, cy, z, 0.0, 0.0, -1.0,
                   *motion, "stop", stop, *plate_words)
+        # the plate's height (m): where this fix started less its displacement down (f_plate[10])
+        s.command("variable", "plate_z", "equal", fix_affine("plate", 10, -1.0, z))
 
     def thermo() -> None:
         s.command("thermo_style", "custom", "step", "atoms",
-                  *(fix_ref("plate", k) for k in (7, 8, 9, 10, 11, 12, 13, 14, 6)),
+                  *(fix_ref("plate", k) for k in (7, 8, 9)), var_ref("press_disp"),
+                  *(fix_ref("plate", k) for k in (11, 12, 13, 14, 6)),
                   fix_ref(YARNS_FIX, 3), fix_ref("FIBER_DLVO_STEP", 6) if pair else fix_ref("plate", 6),
                   fix_ref("plate", 15), *(var_ref(f"static_f{axis}") for axis in "xyz"))
         s.command("thermo", p.every)
 
-    started: list[bool] = []
+    started: list[bool] = [] if resume_step is None else [True]  # a resumed press keeps its steps
 
     def chunks(steps: int, first: bool, leave: tuple[tuple[str, float, str, str], ...] = ()) -> None:
         # leave: (variable, threshold, label, marker): also leave for LABEL when VARIABLE >= threshold
@@ -278,14 +324,16 @@ def build_input(scene: Scene, p: PressPlan) -> str:
                 s.command("if", *jump_if_at_least(var, bound, label, marker))
 
     if pr.mode == "velocity":
-        plate(p.z0, "velocity", 0.0, 0.0, -p.speed)
-        thermo()
-        chunks(p.move_steps, True)
+        if k0 < p.move_steps:
+            plate(p.plate_height(k0), "velocity", 0.0, 0.0, -p.speed)
+            thermo()
+            chunks(p.move_steps - k0, True)
         if p.hold_steps:
-            s.command("unfix", "plate")
+            if k0 < p.move_steps:
+                s.command("unfix", "plate")
             plate(p.z_end)
             thermo()
-            chunks(p.hold_steps, True)
+            chunks(p.hold_steps - max(0, k0 - p.move_steps), True)
     else:
         assert pr.target_pressure_Pa is not None
         sched: list[object] = [len(p.schedule)]
@@ -294,10 +342,9 @@ def build_input(scene: Scene, p: PressPlan) -> str:
         # the approach: the plate moves down at the speed limit until the sheet carries the
         # contact pressure (f_plate[9]: the force on the fibers along z, < 0 when pressed)
         s.command("variable", "p_plate", "equal", fix_affine("plate", 9, -1.0 / p.area, 0.0))
-        s.command("variable", "plate_z", "equal", fix_affine("plate", 10, -1.0, p.z0))
-        plate(p.z0, "velocity", 0.0, 0.0, -pr.plate_speed_m_s)
+        plate(p.plate_height(k0), "velocity", 0.0, 0.0, -pr.plate_speed_m_s)
         thermo()
-        chunks(p.approach_steps, True, (("p_plate", p.contact_pressure, SERVO_LABEL, CONTACT_MARKER),))
+        chunks(p.approach_steps - k0, True, (("p_plate", p.contact_pressure, SERVO_LABEL, CONTACT_MARKER),))
         s.label(SERVO_LABEL)
         # the servo takes the plate where the approach left it (its clock starts at its first
         # contact, at once when the contact pressure was reached); abs(): the approach's plate
@@ -427,21 +474,54 @@ class Press(Stage):
         plan(ctx.scene, ctx.scene.output_path)  # a target thickness above the sheet: exit 2 now
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
-        """The working folder: the lay-down's final restart file, the nodes of the fibers left on
-        the sheet, yarns.txt and the input script."""
+        """The working folder: fresh (the lay-down's final restart file, the nodes of the fibers
+        left on the sheet, yarns.txt) or, with ``--resume``, the killed press's cut back to its last
+        complete restart file (the log up to there kept in EARLIER_LOG); the input script; the
+        start step in PREPARED_STEP."""
         scene = ctx.scene
         up = self.needs(ctx)
         p = plan(scene, scene.output_path)
         work = self.stage_dir(ctx) / "work"
-        if work.exists():
-            shutil.rmtree(work)
-        work.mkdir(parents=True)
-        shutil.copyfile(up["laydown_restart"], work / START_NAME)
-        # the fibers left on the sheet (the lay-down may have removed some)
-        write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
-                           read_sheet(up["laydown_h5"]).fiber_id.tolist())
+        resume_step = None
+        if ctx.options.get("resume") and work.is_dir():
+            earlier = work / EARLIER_LOG
+            before = earlier.read_text(errors="replace") if earlier.is_file() else ""
+            log = before + ((work / LOG_NAME).read_text(errors="replace") if (work / LOG_NAME).is_file() else "")
+            servo = servo_start(log)
+            # pressure mode: the servo's state is not in the restart files; before it took over,
+            # the approach is repeated exactly
+            resume_step = resume_point(work, hashes, RESTART_STEM, TRAJ_NAME,
+                                       lambda step: p.mode == "velocity" or step < (
+                                           servo[0] if servo is not None else p.approach_steps))
+            if resume_step is not None:
+                cut_back(work, resume_step, RESTART_STEM, TRAJ_NAME, LOG_NAME)
+                atomic_write_text(earlier, log_up_to_step(log, resume_step))
+        if resume_step is None:
+            earlier_steps = restart_steps(work, RESTART_STEM) if work.is_dir() else []
+            if earlier_steps:
+                import sys
+
+                why = ("none of them is certainly complete and usable (no snapshot after it; pressure "
+                       "mode: before the servo took over)" if ctx.options.get("resume")
+                       else "`--resume` continues from them")
+                print(f"fiberform press: starting over: the restart files of an earlier run in {work} "
+                      f"(steps {earlier_steps[0]}-{earlier_steps[-1]}) are removed; {why}", file=sys.stderr)
+            if work.exists():
+                shutil.rmtree(work)
+            work.mkdir(parents=True)
+            shutil.copyfile(up["laydown_restart"], work / START_NAME)
+            # the fibers left on the sheet (the lay-down may have removed some)
+            write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
+                               read_sheet(up["laydown_h5"]).fiber_id.tolist())
+            start_fresh(work, hashes)
         write_yarns(work / YARNS_NAME, up["fabric_h5"], lateral_period(scene))
-        (work / INPUT_NAME).write_text(build_input(scene, p))
+        (work / INPUT_NAME).write_text(build_input(scene, p, resume_step))
+        record_prepared(work, resume_step)
+
+    def earlier_elapsed(self, ctx: StageContext) -> float:
+        """A resumed press: fiberdem's time in the parts before it, up to the restart step it
+        continued from (0 when not known)."""
+        return earlier_wall(self.stage_dir(ctx) / "work") or 0.0
 
     def programs(self, ctx: StageContext) -> list[Program]:
         pr = ctx.scene.press
@@ -461,7 +541,12 @@ class Press(Stage):
         yarns = read_yarns(self.needs(ctx)["fabric_h5"])
         key = self.log_key(ctx, work / LOG_NAME)
         wall = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
-        log = (work / LOG_NAME).read_text(errors="replace")
+        # a resumed press: the parts before it, up to the restart step it continued from
+        # (EARLIER_LOG: their log text; their fiberdem time)
+        wall += earlier_wall(work) or 0.0
+        earlier = work / EARLIER_LOG
+        log = ((earlier.read_text(errors="replace") if earlier.is_file() and prepared_step(work) is not None else "")
+               + (work / LOG_NAME).read_text(errors="replace"))
         if has_marker(log, GUARD_MARKER):
             rows = thermo_rows(log)
             last = dict(zip(COLUMNS, rows[-1])) if rows else {}
@@ -503,19 +588,14 @@ class Press(Stage):
         rows = rows[np.sort(first)]
         col = {name: rows[:, k] for k, name in enumerate(COLUMNS)}
         step = col["step"].astype(np.int64)
-        step0 = int(step[0])
-        steps = step - step0
+        steps = step  # from 0 (reset_timestep before the press's first run; a resume keeps them)
         t = steps * p.dt
         start = servo_start(log_text) if pr.mode == "pressure" else None
+        plate_z = p.z0 - col["disp"]  # the displacement since the press's start (variable press_disp)
         if pr.mode == "velocity":
-            moving = steps <= p.move_steps
-            plate_z = np.where(moving, p.z0 - col["disp"], p.z_end - col["disp"])
-            t_contact = np.where(moving, 1.0, -1.0)
+            t_contact = np.where(steps <= p.move_steps, 1.0, -1.0)
         else:
-            # the approach's plate (from z0), then the servo's (from where the approach ended)
-            servo = steps > (start[0] - step0) if start is not None else np.zeros(len(steps), bool)
-            z_servo = start[1] if start is not None else math.nan
-            plate_z = np.where(servo, z_servo - col["disp"], p.z0 - col["disp"])
+            servo = steps > start[0] if start is not None else np.zeros(len(steps), bool)
             t_contact = np.where(servo, col["t_contact"], -1.0)
         force = np.stack([col["fx"], col["fy"], col["fz"]], axis=1)
         pressure = 0.0 - force[:, 2] / p.area  # the plate pushes the fibers down: F_z < 0 (no -0)
@@ -621,6 +701,8 @@ class Press(Stage):
         rg.attrs["start_overlap_yarn_m"] = p.start_overlap_yarn
         rg.attrs["overlap_limit"] = pr.overlap_limit
         rg.attrs["fiberdem_wall_s"] = wall
+        resumed = prepared_step(work)
+        rg.attrs["resumed_from_step"] = -1 if resumed is None else resumed
         rg.attrs["ranks"] = pr.ranks
         rg.attrs["stopped_by_guard"] = int(bool(guard_stop))
         approach_line = []
@@ -629,14 +711,14 @@ class Press(Stage):
             rg.attrs["contact_pressure_Pa"] = p.contact_pressure
             rg.attrs["contact_pressure_reached"] = int(reached)
             rg.attrs["servo_start_z_m"] = start[1] if start is not None else math.nan
-            rg.attrs["servo_start_time_s"] = (start[0] - step0) * p.dt if start is not None else math.nan
+            rg.attrs["servo_start_time_s"] = start[0] * p.dt if start is not None else math.nan
             if start is None:
                 how = (f"did not bring the sheet to {p.contact_pressure:.4g} Pa ({CONTACT_SHARE:g} x the "
                        "target): the press ended in the approach, before the servo took over")
             elif reached:
                 how = (f"reached {p.contact_pressure:.4g} Pa ({CONTACT_SHARE:g} x the target) "
                        f"{(start[1] - p.fabric_top) * 1e6:.2f} um above the fabric top after "
-                       f"{(start[0] - step0) * p.dt * 1e3:.3f} ms: the servo's schedule starts there")
+                       f"{start[0] * p.dt * 1e3:.3f} ms: the servo's schedule starts there")
             else:
                 how = (f"came down to {(start[1] - p.fabric_top) * 1e6:.2f} um above the fabric top "
                        f"without the sheet carrying {p.contact_pressure:.4g} Pa ({CONTACT_SHARE:g} x the "
@@ -669,7 +751,9 @@ class Press(Stage):
             f"start {p.z0 * 1e3:.4f} mm ({pr.plate_start_gap_m * 1e6:.3g} um above the sheet); "
             f"fabric top {p.fabric_top * 1e3:.4f} mm",
             f"- {int(steps[-1])} steps of {p.dt:g} s = {t[-1] * 1e3:.3f} ms simulated; fiberdem "
-            f"wall time {wall:.1f} s on {pr.ranks} rank(s)",
+            f"wall time {wall:.1f} s on {pr.ranks} rank(s)"
+            + ("" if resumed is None else f" (resumed from the restart file of step {resumed}; the "
+               "parts before it counted up to there)"),
             *approach_line,
             *([f"- **{guard_stop}**; the plate was {(plate_z[-1] - p.fabric_top) * 1e6:.2f} um above "
                "the fabric top there: the pressed sheet is that of this moment"] if guard_stop else []),

@@ -1,0 +1,171 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Restart files of a fiberdem (LIGGGHTS) stage run and continuing a killed run from them.
+
+A stage run that writes restart files ``<stem>.<step>.restart`` (LIGGGHTS ``restart N
+<stem>.*.restart``) in its working folder, a snapshot dump (``traj.dump``) and a log
+(``log.fiberdem``) can be continued after a kill (``fiberform <stage> SCENE --resume``):
+
+- :func:`start_fresh` records the input hashes of a fresh run (RESUME_STATE) beside its files;
+- :func:`resume_point` finds the last restart file that is certainly complete (the run wrote a
+  snapshot after it, or an earlier resume started from it) of a run of the same inputs;
+- :func:`cut_back` cuts the snapshots back to that step, removes the later restart files, counts the
+  killed part's fiberdem time up to the step (EARLIER_WALL) and returns the killed part's log;
+- :func:`record_prepared` / :func:`prepared_step` record the step the run starts from (PREPARED_STEP,
+  ``null``: a fresh run), which :func:`earlier_wall` and the stages' collect read.
+
+Used by the stages laydown and press (docs/stages/laydown.md and press.md, "Resuming").
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from .errors import StageError
+from .liggghts_log import run_loop_times
+from .provenance import atomic_write_text
+
+__all__ = [
+    "EARLIER_LOG", "EARLIER_WALL", "PREPARED_STEP", "RESTART_EXT", "RESUME_STATE", "cut_back",
+    "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "record_earlier_wall", "record_prepared",
+    "restart_name", "restart_steps", "resume_point", "start_fresh",
+]
+
+RESTART_EXT = "restart"
+#: the killed parts' log text a resumed run keeps (what each stage needs of it)
+EARLIER_LOG = "log.earlier"
+#: the input hashes of the run whose restart files the working folder holds
+RESUME_STATE = "resume.json"
+#: the fiberdem time of the parts before a resume, up to the restart step it continued from
+EARLIER_WALL = "wall.earlier.json"
+#: written by a stage's prepare: the step the run starts from (null: a fresh run)
+PREPARED_STEP = "prepared-step.json"
+_SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
+
+
+def restart_name(stem: str, step: int) -> str:
+    """The restart file of ``step``: ``<stem>.<step>.restart``."""
+    return f"{stem}.{int(step)}.{RESTART_EXT}"
+
+
+def restart_steps(work: Path, stem: str) -> list[int]:
+    """Steps of the restart files ``<stem>.<step>.restart`` in the working folder, ascending."""
+    pattern = re.compile(re.escape(stem) + r"\.(\d+)\." + RESTART_EXT)
+    out = []
+    for p in work.glob(f"{stem}.*.{RESTART_EXT}"):
+        m = pattern.fullmatch(p.name)
+        if m:
+            out.append(int(m.group(1)))
+    return sorted(out)
+
+
+def dump_snapshots(text: str) -> list[tuple[int, int]]:
+    """(step, offset of its header) of every snapshot in the text of a LIGGGHTS dump file, in file
+    order; a header cut off by a kill (step line incomplete) is not a snapshot."""
+    return [(int(m.group(1)), m.start()) for m in _SNAPSHOT.finditer(text)]
+
+
+def dump_steps(path: Path) -> list[int]:
+    """Steps of the snapshots in a LIGGGHTS dump file (in file order)."""
+    if not path.is_file():
+        return []
+    return [step for step, _ in dump_snapshots(path.read_text(errors="replace"))]
+
+
+def start_fresh(work: Path, hashes: Mapping[str, str]) -> None:
+    """Record the input hashes of a fresh run in its working folder (RESUME_STATE)."""
+    atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
+
+
+def record_prepared(work: Path, step: int | None) -> None:
+    """PREPARED_STEP: the step the run starts from (None: a fresh run)."""
+    atomic_write_text(work / PREPARED_STEP, json.dumps({"resume_step": step}) + "\n")
+
+
+def prepared_step(work: Path) -> int | None:
+    """The step the prepared run starts from (PREPARED_STEP; None: a fresh run or not recorded)."""
+    try:
+        step = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return int(step) if isinstance(step, int) else None
+
+
+def resume_point(work: Path, hashes: Mapping[str, str], stem: str, traj: str,
+                 usable: Callable[[int], bool] = lambda step: True) -> int | None:
+    """The step to resume a killed run from: the last restart file ``<stem>.<step>.restart`` that
+    is certainly complete and ``usable``, if the working folder belongs to the same inputs; None:
+    nothing to resume (start over). Complete: the run wrote a snapshot (dump ``traj``) after it, or
+    an earlier resume started from it (PREPARED_STEP; a resumed run killed before its first new
+    snapshot must not lose that restart file). Raises StageError when the folder holds another
+    run's files."""
+    state = work / RESUME_STATE
+    if not state.is_file():
+        return None
+    try:
+        old = json.loads(state.read_text())
+    except ValueError:
+        return None
+    if old != dict(hashes):
+        raise StageError(f"{work}: the restart files belong to other inputs (scene, upstream "
+                         "products or fiberdem changed); run without --resume to start over")
+    done = max(dump_steps(work / traj), default=-1)
+    resumed = prepared_step(work)
+    complete = max(done - 1, resumed if resumed is not None else -1)
+    good = [s for s in restart_steps(work, stem) if s <= complete and usable(s)]
+    return good[-1] if good else None
+
+
+def cut_back(work: Path, step: int, stem: str, traj: str, log_name: str, dump_text: str | None = None) -> str:
+    """Cut the killed run back to the restart step ``step``: the snapshots of the dump ``traj`` from
+    that step on go (the resumed run writes that step's again and everything after it), later
+    restart files go, and the killed part's fiberdem time up to the step is counted (EARLIER_WALL).
+    ``dump_text``: the dump's text when the caller has read it already. Returns the killed part's
+    log text (``log_name``)."""
+    dump = work / traj
+    if dump_text is None:
+        dump_text = dump.read_text(errors="replace") if dump.is_file() else ""
+    log = work / log_name
+    current = log.read_text(errors="replace") if log.is_file() else ""
+    keep = next((pos for s, pos in dump_snapshots(dump_text) if s >= step), len(dump_text))
+    record_earlier_wall(work, step, current)
+    atomic_write_text(dump, dump_text[:keep])
+    for s in restart_steps(work, stem):
+        if s > step:
+            (work / restart_name(stem, s)).unlink()
+    return current
+
+
+def record_earlier_wall(work: Path, step: int, log: str) -> None:
+    """EARLIER_WALL: the fiberdem time spent on the way to the restart step ``step`` a resume
+    continues from: the Loop times of the killed part's runs (its log text ``log``) that ended at or
+    before ``step`` (its work after the restart step is redone, so not counted) plus what
+    EARLIER_WALL said of the parts before it. ``None`` when a resume goes back behind the step an
+    earlier resume counted to (that count would include work now redone)."""
+    path = work / EARLIER_WALL
+    prev: dict[str, Any] = json.loads(path.read_text()) if path.is_file() else {"up_to_step": 0, "wall_s": 0.0}
+    runs = run_loop_times(log)
+    if prev["wall_s"] is None or int(prev["up_to_step"]) > step:
+        wall = None
+    else:
+        wall = float(prev["wall_s"]) + sum(t for end, t in runs if int(prev["up_to_step"]) < end <= step)
+    atomic_write_text(path, json.dumps({"up_to_step": step, "wall_s": wall}) + "\n")
+
+
+def earlier_wall(work: Path) -> float | None:
+    """The fiberdem time of the parts before this resumed run (EARLIER_WALL), 0 for a run from step
+    0, ``None`` when unknown (:func:`record_earlier_wall`)."""
+    try:
+        resumed = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
+    except (OSError, ValueError, KeyError):
+        return 0.0
+    if resumed is None:
+        return 0.0
+    path = work / EARLIER_WALL
+    if not path.is_file():
+        return None  # a run resumed before fiberform recorded it
+    rec = json.loads(path.read_text())
+    return None if rec["wall_s"] is None or int(rec["up_to_step"]) != int(resumed) else float(rec["wall_s"])
