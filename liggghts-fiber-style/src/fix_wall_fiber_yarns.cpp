@@ -262,7 +262,7 @@ void FixWallFiberYarns::apply_element_contact(int i, int j, double s, const doub
     u0 += v[k] * n[k];
   }
   if (h - 2.0 * std::fabs(u0) * dt >= law().h_cut) return;
-  const double inv_m = wi * wi / mi + wj * wj / mj;
+  const double inv_m = phys::lever_inverse_mass(wi, mi, wj, mj);
   double fpos, fvel;
   normal_solve(p, v, a, inv_m, n, h, r1, r2, fpos, fvel);
   const double fc = applied_force(fpos, fvel);
@@ -283,7 +283,7 @@ void FixWallFiberYarns::apply_friction(int i, int j, double s, const double n[3]
   const double mi = atom->rmass[i], mj = j < 0 ? 1.0 : atom->rmass[j];
   const double *vi = atom->v[i], *fi = atom->f[i];
   const double *vj = j < 0 ? vi : atom->v[j], *fj = j < 0 ? fi : atom->f[j];
-  const double inv_m = wi * wi / mi + (j < 0 ? 0.0 : wj * wj / mj);
+  const double inv_m = j < 0 ? phys::lever_inverse_mass(wi, mi) : phys::lever_inverse_mass(wi, mi, wj, mj);
   double vt[3], at[3], ft[3];
   for (int k = 0; k < 3; ++k) {
     vt[k] = wi * vi[k] + wj * vj[k];

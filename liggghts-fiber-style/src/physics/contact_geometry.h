@@ -6,6 +6,7 @@
 #define FIBERFORM_PHYSICS_CONTACT_GEOMETRY_H
 
 #include <cmath>
+#include <limits>
 
 #include "vec3.h"
 
@@ -117,6 +118,15 @@ inline double rect_extent(Vec3 axis_unit, Vec3 t2, double a1, double a2, Vec3 n,
 struct NodeLoads {
   Vec3 fa, fb, ta, tb;
 };
+
+// The inverse effective mass (1/kg) of a contact point carried by two nodes with lever weights w1,
+// w2 and masses m1, m2 (the point moves with w1 v1 + w2 v2 and a force F on it loads the nodes with
+// w1 F, w2 F, so its acceleration is (w1^2 / m1 + w2^2 / m2) F); a clamped node or a static body
+// has an infinite mass (adds 0). The reduced mass of a contact is 1 / the sum of its two points'.
+inline double lever_inverse_mass(double w1, double m1, double w2 = 0.0,
+                                 double m2 = std::numeric_limits<double>::infinity()) {
+  return w1 * w1 / m1 + w2 * w2 / m2;
+}
 inline NodeLoads transfer_to_nodes(double s, Vec3 F, Vec3 r_off) {
   const Vec3 t = 0.5 * cross(r_off, F);
   return {(1.0 - s) * F, s * F, t, t};

@@ -42,6 +42,7 @@
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <utility>
 #include <vector>
 
 #include "static_bodies.h"
@@ -285,12 +286,8 @@ class ClusterContactModel : public rod::NodeForceModel {
       double cf = 0.0;  // friction's secant coefficient (N s/m)
       if (mu_ > 0.0 && f > 0.0) {
         const Vec3 vt = vrel - u * n;
-        double inv_m = 0.0;
-        for (int i = 0; i < 4; ++i) {  // (a clamped node: infinite mass)
-          const rod::Node &nd = nodes[static_cast<std::size_t>(idx[i])];
-          if (!nd.fixed) inv_m += w[i] * w[i] / nd.m;
-        }
-        cf = regularized_friction_secant(mu_, f, dot(vt, vt), inv_m, stick_, h_);
+        const auto [inv_mA, inv_mB] = point_inverse_masses(A0, A1, B0, B1, w);
+        cf = regularized_friction_secant(mu_, f, dot(vt, vt), inv_mA + inv_mB, stick_, h_);
         for (int i = 0; i < 4; ++i) F[static_cast<std::size_t>(idx[i])] = F[static_cast<std::size_t>(idx[i])] - (w[i] * cf) * vt;
       }
       if (!J) continue;
@@ -364,11 +361,16 @@ class ClusterContactModel : public rod::NodeForceModel {
     }
   }
 
+  // the inverse effective masses (1/kg) of two elements' contact points (signed lever weights w)
+  static std::pair<double, double> point_inverse_masses(const rod::Node &A0, const rod::Node &A1, const rod::Node &B0,
+                                                        const rod::Node &B1, const double w[4]) {
+    return {lever_inverse_mass(w[0], rod::contact_mass(A0), w[1], rod::contact_mass(A1)),
+            lever_inverse_mass(w[2], rod::contact_mass(B0), w[3], rod::contact_mass(B1))};
+  }
   // the law of two elements' contact points (signed lever weights w: reduced mass of each side)
   PairLaw pair_law(const rod::Node &A0, const rod::Node &A1, const rod::Node &B0, const rod::Node &B1,
                    const double w[4]) const {
-    const double inv_mA = w[0] * w[0] / A0.m + w[1] * w[1] / A1.m;
-    const double inv_mB = w[2] * w[2] / B0.m + w[3] * w[3] / B1.m;
+    const auto [inv_mA, inv_mB] = point_inverse_masses(A0, A1, B0, B1, w);
     PairLaw pl;
     const double rA = element_law_radius(A0, A1), rB = element_law_radius(B0, B1);
     pl.setup(law_, rA, rB, inv_mA, inv_mB, law_.effective_potential(rA), law_.effective_potential(rB));

@@ -60,6 +60,7 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -130,6 +131,9 @@ struct Node {
   Vec3 Fint, Tint;  // internal (elastic + material damping) force and torque, spatial
   Vec3 Fmodel;      // force of the NodeForceModels at the end of the step (N), spatial
 };
+
+// A node's mass as the contact laws see it (kg): a clamped node (fixed) does not move: infinite.
+inline double contact_mass(const Node &n) { return n.fixed ? std::numeric_limits<double>::infinity() : n.m; }
 
 // Derivatives of node forces F_k with respect to node positions and velocities, block tridiagonal
 // (3 x 3 blocks, row-major): d = (k, k), l = (k, k-1), u = (k, k+1).

@@ -682,7 +682,8 @@ class BodyContactModel : public rod::NodeForceModel {
     const rod::Node &A = nodes[static_cast<std::size_t>(a)];
     const rod::Node *B = b < 0 ? nullptr : &nodes[static_cast<std::size_t>(b)];
     const Vec3 v = (B ? wa * A.v + wb * B->v : A.v) - hit.vb;  // relative to the body
-    const double inv_m = wa * wa / A.m + (B ? wb * wb / B->m : 0.0);
+    const double inv_m = B ? lever_inverse_mass(wa, rod::contact_mass(A), wb, rod::contact_mass(*B))
+                           : lever_inverse_mass(wa, rod::contact_mass(A));
     const double r1 = B ? element_law_radius(A, *B) : law_radius(A);
     const double u = dot(hit.n, v);
     near_.push_back({a, b, wa, wb, hit.n, hit.h, false, Vec3{}, Vec3{}, r1, hit.r2, inv_m, u, 1.0});
@@ -728,7 +729,7 @@ class BodyContactModel : public rod::NodeForceModel {
     const double wa = 1.0 - hit.s, wb = hit.s;
     const rod::Node &A = nodes[static_cast<std::size_t>(a)], &B = nodes[static_cast<std::size_t>(b)];
     const Vec3 v = wa * A.v + wb * B.v - hit.vb;
-    const double inv_m = wa * wa / A.m + wb * wb / B.m;
+    const double inv_m = lever_inverse_mass(wa, rod::contact_mass(A), wb, rod::contact_mass(B));
     const double r1 = element_law_radius(A, B);
     const double u = dot(ga, A.v - hit.vb) + dot(gb, B.v - hit.vb);
     near_.push_back({a, b, wa, wb, hit.n, hit.h, true, ga, gb, r1, hit.r2, inv_m, u, fscale});
