@@ -353,8 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(
             "--resume",
             action="store_true",
-            help="continue an interrupted lay-down from its last restart file instead of starting "
-            "over; with --force: an OpenFOAM stage resumes its killed solve anyway (without --force it "
+            help="continue an interrupted lay-down or press from its last restart file instead of "
+            "starting over (a pressure-mode press: from one before its servo took over); with --force: an OpenFOAM stage resumes its killed solve anyway (without --force it "
             "resumes one of the same inputs by itself)",
         )
         add_build(p)
@@ -382,8 +382,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--oversubscribe", action="store_true",
                    help="allow more MPI ranks than cores (slow: for testing only)")
     p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted lay-down from its last restart file (OpenFOAM stages resume "
-                   "a killed solve of the same inputs by themselves)")
+                   help="continue an interrupted lay-down or press from its last restart file (OpenFOAM "
+                   "stages resume a killed solve of the same inputs by themselves)")
     add_build(p)
     p.set_defaults(func=_cmd_run)
 
@@ -400,8 +400,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--to", dest="stop", metavar="STAGE", help="as for run (e.g. --to laydown)")
     p.add_argument("--no-run", action="store_true", help="write the variants and sweep.json only")
     p.add_argument("--resume", action="store_true",
-                   help="as for run, in every variant: a killed lay-down continues from its last restart file "
-                   "instead of starting over (serial, with --jobs and in the --submit scripts)")
+                   help="as for run, in every variant: a killed lay-down or press continues from its last "
+                   "restart file instead of starting over (serial, with --jobs and in the --submit scripts)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="run up to N variants at once on this machine (each as `fiberform run`, output "
                    "in <sweep dir>/scenes/<variant>.log; default 1: one after the other); 1-64")
@@ -443,8 +443,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="submit the named stages (no name: every selected stage) even when done; they "
                    "run with --force")
     p.add_argument("--resume", action="store_true",
-                   help="as for run: each script runs its stage with --resume (a killed lay-down continues "
-                   "from its last restart file instead of starting over)")
+                   help="as for run: each script runs its stage with --resume (a killed lay-down or press "
+                   "continues from its last restart file instead of starting over)")
     p.add_argument("--dry-run", action="store_true",
                    help="write and print the scripts, submit nothing")
     add_build(p)
