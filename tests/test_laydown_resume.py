@@ -296,3 +296,29 @@ def test_a_resume_killed_before_its_first_snapshot_resumes_again(tmp_path: Path)
     nodes_left(work, src)
     rows = [ln.split() for ln in (work / "fibers.nodes").read_text().splitlines() if not ln.startswith("#")]
     assert sorted({int(r[1]) for r in rows}) == [1, 2, 4]
+
+
+def test_status_says_how_far_a_resume_continues_from(tmp_path: Path, fiberform_cmd: list[str]) -> None:
+    """``fiberform status`` of a killed lay-down with restart files names the latest one and the
+    run's largest length (6 ms at 1 us: 6000 steps), and that ``--resume`` continues from there; a failed
+    stage without restart files says nothing of it."""
+    import json
+
+    (tmp_path / "s.yaml").write_text(tiny_laydown_scene("status_resume", "s", 1, 0.006))
+    work = tmp_path / "runs/s/laydown/work"
+    work.mkdir(parents=True)
+    (work.parent / "stage-state.json").write_text(json.dumps({
+        "state": "failed", "stage": "laydown", "started_utc": "2026-01-01T00:00:00+00:00",
+        "failed_utc": "2026-01-01T01:00:00+00:00", "error": "terminated (SIGTERM)"}))
+
+    def laydown_line() -> str:
+        proc = subprocess.run([*fiberform_cmd, "status", "s.yaml"], cwd=tmp_path, capture_output=True, text=True,
+                              timeout=120)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return next(line for line in proc.stdout.splitlines() if line.split()[:1] == ["laydown"])
+
+    assert "restart" not in laydown_line()
+    for step in (2000, 4000):
+        (work / f"laydown.{step}.restart").write_text("restart\n")
+    line = laydown_line()
+    assert "failed" in line and "restart files to step 4000 of at most 6000" in line and "--resume" in line, line

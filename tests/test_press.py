@@ -325,6 +325,15 @@ def test_killed_press_resumes_to_the_same_sheet(sheet: Path, fiberform_cmd: list
     rc = terminate_when([*fiberform_cmd, "press", f"resume_{mode}.yaml", "--build-dir", str(build_dir)],
                         sheet, out / "work" / f"press.{last}.restart", timeout_s=600, kill_group=True)
     assert rc != 0 and not (out / "press.h5").exists()
+    # `fiberform status` names the latest restart file and the press's largest length (velocity
+    # mode: its length; pressure mode: the approach may end before its largest travel)
+    status = _cli(fiberform_cmd, ["status", f"resume_{mode}.yaml", "--build-dir", str(build_dir)], sheet)
+    line = next(ln for ln in status.stdout.splitlines() if ln.split()[:1] == ["press"])
+    found = re.search(r"restart files to step (\d+) of at most (\d+)", line)
+    assert found and "--resume" in line, line
+    assert int(found.group(1)) == last, line
+    assert (int(found.group(2)) == int(ref["step"][-1]) if mode == "velocity"
+            else int(found.group(2)) >= int(ref["step"][-1])), line
     res = _cli(fiberform_cmd, ["press", f"resume_{mode}.yaml", "--resume", "--build-dir", str(build_dir)], sheet)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
     got = result()

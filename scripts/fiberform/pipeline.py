@@ -138,6 +138,10 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _resumable(info: str) -> str:
+    return f"; {info}: `--resume` continues from the last complete one" if info else ""
+
+
 def _stage_status(stage: Stage, ctx: StageContext) -> StageStatus:
     name = stage.name
     state_file = stage.state_path(ctx)
@@ -146,15 +150,18 @@ def _stage_status(stage: Stage, ctx: StageContext) -> StageStatus:
             rec = json.loads(state_file.read_text())
         except (OSError, ValueError):
             rec = {"state": "failed", "error": f"unreadable {state_file}"}
+        # a lay-down or press with restart files: how far `--resume` would continue from
+        info = stage.resume_info(ctx) if rec.get("state") in ("running", "failed") else ""
         if rec.get("state") == "running":
             here = rec.get("host") == socket.gethostname()
             if not here or _pid_alive(int(rec.get("pid", 0))):
                 where = "" if here else f" on {rec.get('host')}"
-                return StageStatus(name, "running", f"since {rec.get('started_utc')}{where} (pid {rec.get('pid')})")
+                return StageStatus(name, "running", f"since {rec.get('started_utc')}{where} (pid {rec.get('pid')})"
+                                   + (f"; {info}" if info else ""))
             return StageStatus(name, "failed", f"process {rec.get('pid')} started {rec.get('started_utc')} "
-                                               "is gone (killed?)")
+                                               "is gone (killed?)" + _resumable(info))
         if rec.get("state") == "failed":
-            return StageStatus(name, "failed", f"at {rec.get('failed_utc')}: {rec.get('error')}")
+            return StageStatus(name, "failed", f"at {rec.get('failed_utc')}: {rec.get('error')}" + _resumable(info))
     paths = stage.product_paths(ctx)
     if not all(p.is_file() for p in paths):
         return StageStatus(name, "missing", "")

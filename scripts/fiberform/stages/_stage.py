@@ -290,6 +290,11 @@ class Stage(abc.ABC):
         prepared.unlink(missing_ok=True)
         return Outcome(self.name, False, self.product_paths(ctx), time.monotonic() - start, "done")
 
+    def resume_info(self, ctx: StageContext) -> str:
+        """For ``fiberform status`` of a running or failed stage: what a ``--resume`` would continue
+        from (the latest restart file and the run's length); "" for a stage that does not resume."""
+        return ""
+
     def earlier_elapsed(self, ctx: StageContext) -> float:
         """Seconds spent before this run on the work it continues (a resumed stage: the killed
         parts up to the point it resumed from), added to the product's ``elapsed_s``; 0 here."""

@@ -371,6 +371,13 @@ class Laydown(Stage):
             resume_fluid(work, scene, int(resume_step))
         record_prepared(work, resume_step)
 
+    def resume_info(self, ctx: StageContext) -> str:
+        steps = restart_steps(self.stage_dir(ctx) / "work")
+        if not steps:
+            return ""
+        per, checks = run_lengths(ctx.scene)
+        return f"restart files to step {steps[-1]} of at most {per * checks}"  # (it may settle earlier)
+
     def earlier_elapsed(self, ctx: StageContext) -> float:
         """A resumed lay-down: fiberdem's time in the parts before it, up to the restart step it
         continued from (EARLIER_WALL; 0 when not known)."""

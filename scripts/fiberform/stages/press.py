@@ -518,6 +518,17 @@ class Press(Stage):
         (work / INPUT_NAME).write_text(build_input(scene, p, resume_step))
         record_prepared(work, resume_step)
 
+    def resume_info(self, ctx: StageContext) -> str:
+        steps = restart_steps(self.stage_dir(ctx) / "work", RESTART_STEM)
+        if not steps:
+            return ""
+        try:
+            # (pressure mode: the approach may end before its largest travel)
+            total = f" of at most {plan(ctx.scene, ctx.scene.output_path).total_steps}"
+        except (OSError, KeyError, StageError, SceneError):  # lay-down products gone or changed
+            total = ""
+        return f"restart files to step {steps[-1]}{total}"
+
     def earlier_elapsed(self, ctx: StageContext) -> float:
         """A resumed press: fiberdem's time in the parts before it, up to the restart step it
         continued from (0 when not known)."""
