@@ -22,7 +22,9 @@ from laydown_scenes import tiny_laydown_scene
 
 pytestmark = pytest.mark.system
 
-TOL_RESUME = 1e-9  # m: the resumed run repeats the uninterrupted one (restart files are exact)
+# m: the resumed run repeats the uninterrupted one, not to the bit but far within this (a resumed
+# press differs by 3e-11 m after 1400 steps: docs/stages/press.md, "Resuming")
+TOL_RESUME = 1e-9
 TOL_RANKS = 1e-9   # m (measured: identical; each fiber is solved whole on one rank)
 
 
