@@ -22,8 +22,8 @@ from laydown_scenes import tiny_laydown_scene
 
 pytestmark = pytest.mark.system
 
-# m: the resumed run repeats the uninterrupted one, not to the bit but far within this (a resumed
-# press differs by 3e-11 m after 1400 steps: docs/stages/press.md, "Resuming")
+# m: the resumed run repeats the uninterrupted one (the restart files are exact; a resumed press
+# is identical to the bit, docs/stages/press.md, "Resuming"; the lay-down is held to this bound)
 TOL_RESUME = 1e-9
 TOL_RANKS = 1e-9   # m (measured: identical; each fiber is solved whole on one rank)
 

@@ -282,16 +282,14 @@ def test_one_and_two_ranks_press_the_same_sheet(sheet: Path, fiberform_cmd: list
 def test_killed_press_resumes_to_the_same_sheet(sheet: Path, fiberform_cmd: list[str], build_dir: Path,
                                                 mode: str) -> None:
     """Restart files every 2 output intervals (press.<step>.restart); a press killed (SIGKILL to its
-    process group) late in its run and continued with ``--resume`` ends as the uninterrupted one.
-
-    Velocity mode resumes from its last complete restart file: the same curve points, plate heights
-    (to 1e-12 m), pressures (1e-6 of the largest) and pressed sheet (1e-9 m; measured 3e-11 m: not
-    bit for bit, the contact lists are rebuilt after read_restart, docs/stages/press.md). Pressure mode resumes only from a restart file
-    before the servo took over (its state is not in the file), or starts over; the replayed
-    approach equals the uninterrupted one to round-off (nodes 1e-12 m, measured 8e-14 m at the
-    servo's start), the servo starts at the same height; after that the servo's contact feedback
-    amplifies the round-off (measured: 2e-9 m of plate height, 0.085 Pa at a 0.17 Pa point), so its
-    pressures are held to the servo's own resolution, its proportional band (0.2 Pa here)."""
+    process group) late in its run and continued with ``--resume`` ends as the uninterrupted one,
+    to the bit: every curve point (plate height, pressure) and node of every snapshot. (The plate
+    is defined again at every restart step in both runs, at the stage's height: without that the
+    fix's sum of steps and the resumed definition differ in the last bits, and the contacts grow
+    it: 3e-11 m at the end of the velocity press, 2e-9 m and 0.085 Pa in the pressure press's
+    servo; docs/stages/press.md, "Resuming".) Velocity mode resumes from its last complete restart
+    file; pressure mode only from one before the servo took over (its state is not in the file), or
+    it starts over."""
     from cli_helpers import terminate_when
     from fiberform.liggghts_log import read_dump
 
@@ -338,28 +336,17 @@ def test_killed_press_resumes_to_the_same_sheet(sheet: Path, fiberform_cmd: list
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
     got = result()
     start = int(got["resumed"])
-    assert np.array_equal(got["step"], ref["step"]), "curve points repeated, lost or out of order"
-    assert np.array_equal(got["id"], ref["id"])
     if mode == "velocity":
         assert start >= last - 200 and start % 200 == 0, (start, last)  # its last complete one
-        assert np.max(np.abs(got["z"] - ref["z"])) < 1e-12, np.max(np.abs(got["z"] - ref["z"]))
-        assert np.max(np.abs(got["x"] - ref["x"])) < 1e-9, np.max(np.abs(got["x"] - ref["x"]))
-        scale = max(1e-12, float(np.max(np.abs(ref["p"]))))
-        assert np.max(np.abs(got["p"] - ref["p"])) <= 1e-6 * scale, (np.max(np.abs(got["p"] - ref["p"])), scale)
-        return
-    servo_step = round(float(ref["servo"][0]) / 1e-6)  # laydown.timestep_s 1e-6
-    # the last restart file before the servo took over (none: it starts over)
-    before = (servo_step - 1) // 200 * 200
-    assert start == (before if before > 0 else -1), (start, servo_step)
-    assert abs(float(got["servo"][0]) - float(ref["servo"][0])) < 1e-12
-    assert abs(float(got["servo"][1]) - float(ref["servo"][1])) < 1e-12, (got["servo"], ref["servo"])
-    approach = ref["step"] <= servo_step
-    assert np.max(np.abs(got["z"][approach] - ref["z"][approach])) < 1e-12
-    for st in ref["step"][approach]:
-        d = np.max(np.abs(got[f"nodes{st}"] - ref[f"nodes{st}"]))
-        assert d < 1e-12, (st, d)
-    band = 0.1 * 2.0  # servo_band_Pa's default, 0.1 x target_pressure_Pa
-    assert np.max(np.abs(got["p"] - ref["p"])) < band, np.c_[ref["step"], got["p"], ref["p"]]
+    else:
+        servo_step = round(float(ref["servo"][0]) / 1e-6)  # laydown.timestep_s 1e-6
+        # the last restart file before the servo took over (none: it starts over)
+        before = (servo_step - 1) // 200 * 200
+        assert start == (before if before > 0 else -1), (start, servo_step)
+    assert sorted(got) == sorted(ref)  # the same snapshots
+    for key in ref:
+        if key != "resumed":
+            assert np.array_equal(got[key], ref[key], equal_nan=True), (key, np.max(np.abs(got[key] - ref[key])))
 
 
 def test_permeability_after_the_press_reads_the_pressed_sheet(sheet: Path, fiberform_cmd: list[str],

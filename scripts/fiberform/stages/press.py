@@ -300,18 +300,24 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
 
     started: list[bool] = [] if resume_step is None else [True]  # a resumed press keeps its steps
 
-    def chunks(steps: int, first: bool, leave: tuple[tuple[str, float, str, str], ...] = ()) -> None:
-        # leave: (variable, threshold, label, marker): also leave for LABEL when VARIABLE >= threshold
+    def chunks(steps: int, first: bool, leave: tuple[tuple[str, float, str, str], ...] = (),
+               start: int = 0, renew: Callable[[int], None] | None = None) -> None:
+        # leave: (variable, threshold, label, marker): also leave for LABEL when VARIABLE >= threshold;
+        # start: the press step the chunks begin at; renew(step): define the plate again at a
+        # restart step, where a resumed run defines it afresh (the plate's height is then the
+        # stage's number in both, not the fix's sum of steps: they go on identical to the bit)
         done = 0
+        full = first
         while done < steps:
             n = min(p.every, steps - done)
-            if first and done == 0:
+            if full:
                 if not started:
                     # outputs at whole output intervals from the press's start (LIGGGHTS wants it
                     # right before a run after read_restart)
                     s.command("reset_timestep", 0)
                     started.append(True)
-                s.command("run", n)
+                s.command("run", n)  # (with setup: a fix defined since the last run)
+                full = False
             else:
                 s.command("run", n, "pre", "no", "post", "no")
             done += n
@@ -322,18 +328,29 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
                 s.command("if", *jump_if_at_least(var, bound, END_LABEL, GUARD_MARKER))
             for var, bound, label, marker in leave:
                 s.command("if", *jump_if_at_least(var, bound, label, marker))
+            if renew is not None and p.restart_every and (start + done) % p.restart_every == 0 and done < steps:
+                s.command("unfix", "plate")
+                renew(start + done)
+                thermo()
+                full = True
 
     if pr.mode == "velocity":
+        def moving(step: int) -> None:
+            plate(p.plate_height(step), "velocity", 0.0, 0.0, -p.speed)
+
+        def holding(step: int) -> None:
+            plate(p.z_end)
+
         if k0 < p.move_steps:
-            plate(p.plate_height(k0), "velocity", 0.0, 0.0, -p.speed)
+            moving(k0)
             thermo()
-            chunks(p.move_steps - k0, True)
+            chunks(p.move_steps - k0, True, start=k0, renew=moving)
         if p.hold_steps:
             if k0 < p.move_steps:
                 s.command("unfix", "plate")
-            plate(p.z_end)
+            holding(max(k0, p.move_steps))
             thermo()
-            chunks(p.hold_steps - max(0, k0 - p.move_steps), True)
+            chunks(p.hold_steps - max(0, k0 - p.move_steps), True, start=max(k0, p.move_steps), renew=holding)
     else:
         assert pr.target_pressure_Pa is not None
         sched: list[object] = [len(p.schedule)]
@@ -342,9 +359,13 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
         # the approach: the plate moves down at the speed limit until the sheet carries the
         # contact pressure (f_plate[9]: the force on the fibers along z, < 0 when pressed)
         s.command("variable", "p_plate", "equal", fix_affine("plate", 9, -1.0 / p.area, 0.0))
-        plate(p.plate_height(k0), "velocity", 0.0, 0.0, -pr.plate_speed_m_s)
+        def approaching(step: int) -> None:
+            plate(p.plate_height(step), "velocity", 0.0, 0.0, -pr.plate_speed_m_s)
+
+        approaching(k0)
         thermo()
-        chunks(p.approach_steps - k0, True, (("p_plate", p.contact_pressure, SERVO_LABEL, CONTACT_MARKER),))
+        chunks(p.approach_steps - k0, True, (("p_plate", p.contact_pressure, SERVO_LABEL, CONTACT_MARKER),),
+               start=k0, renew=approaching)
         s.label(SERVO_LABEL)
         # the servo takes the plate where the approach left it (its clock starts at its first
         # contact, at once when the contact pressure was reached); abs(): the approach's plate
