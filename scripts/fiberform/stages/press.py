@@ -23,9 +23,10 @@ than ``overlap_limit`` x the thinner fiber's thickness; the stage then fails wit
 
 fiberdem writes restart files ``press.<step>.restart`` every ``restart_interval_s`` (whole output
 intervals); ``fiberform press SCENE --resume`` continues a killed press from the last complete one
-(fiberform.liggghts_restart): the plate is set again where the uninterrupted run had it (velocity
-mode, and the pressure mode's approach; the servo's state is not in the restart file, so a
-pressure-mode press resumes from a restart file before the servo took over, else it starts over).
+(fiberform.liggghts_restart), identical to the bit to an uninterrupted run: both define the plate
+afresh at every restart step, at PressPlan.plate_height (velocity mode, and the pressure mode's
+approach; the servo's state is not in the restart file, so a pressure-mode press resumes from a
+restart file before the servo took over, else it starts over).
 
 Products in ``<output_dir>/press/``: ``press.h5`` (curve, profiles, final sheet, provenance),
 ``sheet.vtu``, ``press.png``, ``curve.png``, ``report.md``, ``sheet.restart`` (the pressed state).
