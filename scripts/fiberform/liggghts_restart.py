@@ -119,17 +119,20 @@ def resume_point(work: Path, hashes: Mapping[str, str], stem: str, traj: str,
     return good[-1] if good else None
 
 
-def cut_back(work: Path, step: int, stem: str, traj: str, log_name: str, dump_text: str | None = None) -> str:
+def cut_back(work: Path, step: int, stem: str, traj: str, log_name: str, dump_text: str | None = None,
+             log_text: str | None = None) -> str:
     """Cut the killed run back to the restart step ``step``: the snapshots of the dump ``traj`` from
     that step on go (the resumed run writes that step's again and everything after it), later
     restart files go, and the killed part's fiberdem time up to the step is counted (EARLIER_WALL).
-    ``dump_text``: the dump's text when the caller has read it already. Returns the killed part's
-    log text (``log_name``)."""
+    ``dump_text``, ``log_text``: the dump's and the log's text when the caller has read them already.
+    Returns the killed part's log text (``log_name``)."""
     dump = work / traj
     if dump_text is None:
         dump_text = dump.read_text(errors="replace") if dump.is_file() else ""
-    log = work / log_name
-    current = log.read_text(errors="replace") if log.is_file() else ""
+    if log_text is None:
+        log = work / log_name
+        log_text = log.read_text(errors="replace") if log.is_file() else ""
+    current = log_text
     keep = next((pos for s, pos in dump_snapshots(dump_text) if s >= step), len(dump_text))
     record_earlier_wall(work, step, current)
     atomic_write_text(dump, dump_text[:keep])

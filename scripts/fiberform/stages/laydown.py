@@ -761,7 +761,7 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
                  for s, ids in removals_from_dump(text, dump_snapshots(text), step,
                                                   fibers_in_nodes(generated_nodes), "\n".join(kept))]
     # (checked before anything is cut: a contradiction leaves the killed run's files as they were)
-    cut_back(work, step, RESTART_STEM, TRAJ_NAME, LOG_NAME, text)
+    cut_back(work, step, RESTART_STEM, TRAJ_NAME, LOG_NAME, text, current)
     atomic_write_text(earlier, "".join(line + "\n" for line in kept))
 
 

@@ -110,7 +110,6 @@ class PressPlan:
         # chunk's end); 0: none
         self.restart_every = (self.every * max(1, round(pr.restart_interval_s / pr.output_interval_s))
                               if pr.restart_interval_s > 0.0 else 0)
-        self.plate_speed = pr.plate_speed_m_s
         self.z0 = sheet_top + pr.plate_start_gap_m
         self.fabric_top = fabric_top
         self.area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
@@ -168,7 +167,7 @@ class PressPlan:
         if self.mode == "velocity":
             return self.z0 - self.speed * step * self.dt if step <= self.move_steps else self.z_end
         assert step <= self.approach_steps, (step, self.approach_steps)
-        return max(self.fabric_top, self.z0 - self.plate_speed * step * self.dt)
+        return max(self.fabric_top, self.z0 - self.speed * step * self.dt)  # speed: the approach's
 
     @cached_property
     def start_overlaps(self) -> tuple[float, float]:
@@ -508,7 +507,8 @@ class Press(Stage):
         if ctx.options.get("resume") and work.is_dir():
             earlier = work / EARLIER_LOG
             before = earlier.read_text(errors="replace") if earlier.is_file() else ""
-            log = before + ((work / LOG_NAME).read_text(errors="replace") if (work / LOG_NAME).is_file() else "")
+            current = (work / LOG_NAME).read_text(errors="replace") if (work / LOG_NAME).is_file() else ""
+            log = before + current
             servo = servo_start(log)
             # pressure mode: the servo's state is not in the restart files; before it took over,
             # the approach is repeated exactly
@@ -516,7 +516,7 @@ class Press(Stage):
                                        lambda step: p.mode == "velocity" or step < (
                                            servo[0] if servo is not None else p.approach_steps))
             if resume_step is not None:
-                cut_back(work, resume_step, RESTART_STEM, TRAJ_NAME, LOG_NAME)
+                cut_back(work, resume_step, RESTART_STEM, TRAJ_NAME, LOG_NAME, log_text=current)
                 atomic_write_text(earlier, log_up_to_step(log, resume_step))
         if resume_step is None:
             earlier_steps = restart_steps(work, RESTART_STEM) if work.is_dir() else []
