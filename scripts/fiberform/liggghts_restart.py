@@ -31,7 +31,8 @@ from .provenance import atomic_write_text
 __all__ = [
     "EARLIER_LOG", "EARLIER_WALL", "PREPARED_STEP", "RESTART_EXT", "RESUME_STATE", "cut_back",
     "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "record_earlier_wall", "record_prepared",
-    "restart_name", "restart_steps", "resume_point", "start_fresh",
+    "read_text_if", "restart_interval_steps", "restart_name", "restart_steps", "resume_point", "run_log",
+    "run_log_parts", "start_fresh",
 ]
 
 RESTART_EXT = "restart"
@@ -44,6 +45,31 @@ EARLIER_WALL = "wall.earlier.json"
 #: written by a stage's prepare: the step the run starts from (null: a fresh run)
 PREPARED_STEP = "prepared-step.json"
 _SNAPSHOT = re.compile(r"^ITEM: TIMESTEP\n(\d+)\n", re.M)
+
+
+def read_text_if(path: Path) -> str:
+    """The text of ``path`` ("" when it does not exist; undecodable bytes replaced)."""
+    return path.read_text(errors="replace") if path.is_file() else ""
+
+
+def run_log_parts(work: Path, log_name: str) -> tuple[str, str]:
+    """A run's log along its path in two parts: that of the killed parts before the restart step it
+    resumed from (EARLIER_LOG; "" for a run from step 0) and this part's (``log_name``)."""
+    return read_text_if(work / EARLIER_LOG), read_text_if(work / log_name)
+
+
+def run_log(work: Path, log_name: str) -> str:
+    """A run's whole log along its path (:func:`run_log_parts` joined)."""
+    return "".join(run_log_parts(work, log_name))
+
+
+def restart_interval_steps(interval_s: float, output_interval_s: float, steps_per_output: int) -> int:
+    """Steps between restart files: ``interval_s`` rounded to a whole number (at least one) of the
+    output intervals of ``steps_per_output`` steps each, so that a resume starts at a snapshot and
+    at a run chunk's end; 0 (no restart files) when ``interval_s`` <= 0."""
+    if interval_s <= 0.0:
+        return 0
+    return steps_per_output * max(1, round(interval_s / output_interval_s))
 
 
 def restart_name(stem: str, step: int) -> str:
@@ -128,11 +154,8 @@ def cut_back(work: Path, step: int, stem: str, traj: str, log_name: str, dump_te
     Returns the killed part's log text (``log_name``)."""
     dump = work / traj
     if dump_text is None:
-        dump_text = dump.read_text(errors="replace") if dump.is_file() else ""
-    if log_text is None:
-        log = work / log_name
-        log_text = log.read_text(errors="replace") if log.is_file() else ""
-    current = log_text
+        dump_text = read_text_if(dump)
+    current = read_text_if(work / log_name) if log_text is None else log_text
     keep = next((pos for s, pos in dump_snapshots(dump_text) if s >= step), len(dump_text))
     record_earlier_wall(work, step, current)
     atomic_write_text(dump, dump_text[:keep])

@@ -57,7 +57,8 @@ from .. import liggghts_restart
 from ..liggghts_log import dump_frame, read_dump, total_wall_time
 from ..liggghts_restart import (
     EARLIER_LOG, EARLIER_WALL, PREPARED_STEP, RESTART_EXT, RESUME_STATE, cut_back, dump_snapshots, dump_steps,
-    earlier_wall, record_earlier_wall, record_prepared, restart_name, start_fresh,
+    earlier_wall, prepared_step, read_text_if, record_earlier_wall, record_prepared, restart_interval_steps,
+    restart_name, run_log, run_log_parts, start_fresh,
 )
 from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
@@ -136,10 +137,8 @@ def restart_every(scene: Scene) -> int:
     """Steps between restart files (a whole number of checks; 0: none)."""
     ld = scene.laydown
     assert ld is not None
-    if ld.restart_interval_s <= 0.0:
-        return 0
     steps_per_check, _ = run_lengths(scene)
-    return steps_per_check * max(1, round(ld.restart_interval_s / ld.check_interval_s))
+    return restart_interval_steps(ld.restart_interval_s, ld.check_interval_s, steps_per_check)
 
 
 def render_input(scene: Scene, superficial_velocity_m_s: float, resume_step: int | None = None) -> str:
@@ -402,7 +401,7 @@ class Laydown(Stage):
         assert ld is not None and f is not None and dom is not None
         paths = self.needs(ctx)
         work = self.stage_dir(ctx) / "work"
-        resume_step = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
+        resume_step = prepared_step(work)
         yarns = read_yarns(paths["fabric_h5"])
         # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns had them, with
         # the nodes (elements: the chains) wrapped into the box
@@ -422,9 +421,7 @@ class Laydown(Stage):
         # a resumed run: the parts before it, to the restart step it continued from, count too
         wall_before = earlier_wall(work)
         wall = wall_part + (wall_before or 0.0)
-        earlier = work / EARLIER_LOG
-        log = ((earlier.read_text(errors="replace") if earlier.is_file() else "")
-               + (work / LOG_NAME).read_text(errors="replace"))
+        log = run_log(work, LOG_NAME)
         frames = read_dump(work / TRAJ_NAME)
         if not frames:
             raise StageError(f"{work / TRAJ_NAME}: no snapshot written")
@@ -748,12 +745,10 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
     ``generated_nodes`` (the generated fibers' nodes file) a removal whose log line the killed run
     did not get out (a buffered log) is recovered from the snapshots (:func:`removals_from_dump`)."""
     dump = work / TRAJ_NAME
-    text = dump.read_text(errors="replace") if dump.is_file() else ""
-    log = work / LOG_NAME
-    current = log.read_text(errors="replace") if log.is_file() else ""
+    text = read_text_if(dump)
+    before, current = run_log_parts(work, LOG_NAME)
     # removals up to the restart step are in the restart file's state: keep their log lines
-    earlier = work / EARLIER_LOG
-    old = (earlier.read_text(errors="replace") if earlier.is_file() else "") + current
+    old = before + current
     kept = [m.group(0) for m in _REMOVED.finditer(old) if int(m.group(1)) <= step]
     if generated_nodes is not None:
         kept += [f"fix fiber/remove: step {s} removed fiber(s) "
@@ -762,7 +757,7 @@ def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -
                                                   fibers_in_nodes(generated_nodes), "\n".join(kept))]
     # (checked before anything is cut: a contradiction leaves the killed run's files as they were)
     cut_back(work, step, RESTART_STEM, TRAJ_NAME, LOG_NAME, text, current)
-    atomic_write_text(earlier, "".join(line + "\n" for line in kept))
+    atomic_write_text(work / EARLIER_LOG, "".join(line + "\n" for line in kept))
 
 
 def snapshot_fibers(text: str, pos: int) -> set[int]:
@@ -819,8 +814,7 @@ def write_nodes_left(nodes: Path, dst: Path, log: str, up_to_step: int | None = 
 def nodes_left(work: Path, nodes: Path) -> None:
     """The working folder's nodes file of a resumed run: the fibers of ``nodes`` (the generated
     fibers) less those removed up to the restart step (the log lines prepare_resume kept)."""
-    earlier = work / EARLIER_LOG
-    write_nodes_left(nodes, work / NODES_NAME, earlier.read_text(errors="replace") if earlier.is_file() else "")
+    write_nodes_left(nodes, work / NODES_NAME, read_text_if(work / EARLIER_LOG))
 
 
 def json_list(items: list[str]) -> str:

@@ -59,8 +59,8 @@ from ..inputs import (
 )
 from ..liggghts_log import log_up_to_step, read_dump, thermo_rows, total_wall_time
 from ..liggghts_restart import (
-    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, restart_name, restart_steps,
-    resume_point, start_fresh,
+    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, restart_interval_steps,
+    restart_name, restart_steps, resume_point, run_log, run_log_parts, start_fresh,
 )
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
@@ -106,10 +106,8 @@ class PressPlan:
         assert pr is not None and ld is not None and dom is not None
         self.dt = pr.timestep_s if pr.timestep_s is not None else ld.timestep_s
         self.every = max(1, round(pr.output_interval_s / self.dt))
-        # steps between restart files (whole output intervals: a resume starts at a snapshot and a
-        # chunk's end); 0: none
-        self.restart_every = (self.every * max(1, round(pr.restart_interval_s / pr.output_interval_s))
-                              if pr.restart_interval_s > 0.0 else 0)
+        # steps between restart files (whole output intervals); 0: none
+        self.restart_every = restart_interval_steps(pr.restart_interval_s, pr.output_interval_s, self.every)
         self.z0 = sheet_top + pr.plate_start_gap_m
         self.fabric_top = fabric_top
         self.area = (dom.hi_m[0] - dom.lo_m[0]) * (dom.hi_m[1] - dom.lo_m[1])
@@ -505,9 +503,7 @@ class Press(Stage):
         work = self.stage_dir(ctx) / "work"
         resume_step = None
         if ctx.options.get("resume") and work.is_dir():
-            earlier = work / EARLIER_LOG
-            before = earlier.read_text(errors="replace") if earlier.is_file() else ""
-            current = (work / LOG_NAME).read_text(errors="replace") if (work / LOG_NAME).is_file() else ""
+            before, current = run_log_parts(work, LOG_NAME)
             log = before + current
             servo = servo_start(log)
             # pressure mode: the servo's state is not in the restart files; before it took over,
@@ -517,7 +513,7 @@ class Press(Stage):
                                            servo[0] if servo is not None else p.approach_steps))
             if resume_step is not None:
                 cut_back(work, resume_step, RESTART_STEM, TRAJ_NAME, LOG_NAME, log_text=current)
-                atomic_write_text(earlier, log_up_to_step(log, resume_step))
+                atomic_write_text(work / EARLIER_LOG, log_up_to_step(log, resume_step))
         if resume_step is None:
             earlier_steps = restart_steps(work, RESTART_STEM) if work.is_dir() else []
             if earlier_steps:
@@ -577,9 +573,7 @@ class Press(Stage):
         # a resumed press: the parts before it, up to the restart step it continued from
         # (EARLIER_LOG: their log text; their fiberdem time)
         wall += earlier_wall(work) or 0.0
-        earlier = work / EARLIER_LOG
-        log = ((earlier.read_text(errors="replace") if earlier.is_file() and prepared_step(work) is not None else "")
-               + (work / LOG_NAME).read_text(errors="replace"))
+        log = run_log(work, LOG_NAME)
         if has_marker(log, GUARD_MARKER):
             rows = thermo_rows(log)
             last = dict(zip(COLUMNS, rows[-1])) if rows else {}
