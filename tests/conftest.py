@@ -20,9 +20,6 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "system: slow end-to-end test that runs built binaries (fiberdem, OpenFOAM)"
     )
-    config.addinivalue_line(
-        "markers", "validation: long validation run, only in `make validate` (not in `make test`)"
-    )
 
 
 @pytest.fixture(scope="session")
