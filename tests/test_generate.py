@@ -222,7 +222,7 @@ def test_cli_generate_then_fiberdem_loads(tmp_path: Path, build_dir: Path,
         total = float(h5["fibers"].attrs["total_mass_kg"])
         masses = h5["fibers/mass"][:]
         assert h5["fibers/x"].attrs["units"] == "m"
-        assert h5.attrs.get("stage") == "generate" or "stage" in str(dict(h5.attrs))
+        assert h5.attrs["stage"] == "generate"
     assert abs(total - 1e-9) <= masses.max()
     # fiberdem loads the fibers with fix fiber/beam
     q = subprocess.run([str(exe), "-in", "in.fibers", "-log", "log.fiberdem"], cwd=out, env=env,
@@ -274,3 +274,60 @@ def test_periodic_placement_covers_the_sides_without_intersections() -> None:
                         continue  # too far apart to touch (0.5 mm fibers)
                     img = Fiber(x=b.fiber.x + np.array([dx, dy, 0.0]), q=b.fiber.q, radii=b.fiber.radii)
                     assert not segments_intersect(a.fiber, img)
+
+
+BAD_GENERATION = {
+    # (replaced line of SCENE, its replacement, words the error names)
+    "negative fixed length": ("  length_m: {kind: lognormal, mean: 1.0e-3, sd: 0.3e-3, min: 0.3e-3, max: 2.0e-3}",
+                              "  length_m: {kind: fixed, value: -1.0e-3}",
+                              "fiber_generation.length_m", "must lie in (0, 0.1]"),
+    "a field of another kind": ("  curvature_alpha: {kind: uniform, low: 0.9, high: 1.0}",
+                                "  curvature_alpha: {kind: uniform, low: 0.9, high: 1.0, mean: 0.95}",
+                                "fiber_generation.curvature_alpha.mean", "only used with kind normal"),
+    "curvature above 1": ("  curvature_alpha: {kind: uniform, low: 0.9, high: 1.0}",
+                          "  curvature_alpha: {kind: uniform, low: 0.9, high: 1.2}",
+                          "fiber_generation.curvature_alpha", "must lie in (0, 1]"),
+    "untruncated normal width": ("  width_m: {kind: normal, mean: 30.0e-6, sd: 5.0e-6, min: 15.0e-6, max: 45.0e-6}",
+                                 "  width_m: {kind: normal, mean: 30.0e-6, sd: 5.0e-6}",
+                                 "fiber_generation.width_m", "truncate with min and max"),
+    "data without a file": ("  width_m: {kind: normal, mean: 30.0e-6, sd: 5.0e-6, min: 15.0e-6, max: 45.0e-6}",
+                            "  width_m: {kind: data}", "fiber_generation.width_m", "needs fiber_generation.data_csv"),
+    "min above max": ("  width_m: {kind: normal, mean: 30.0e-6, sd: 5.0e-6, min: 15.0e-6, max: 45.0e-6}",
+                      "  width_m: {kind: normal, mean: 30.0e-6, sd: 5.0e-6, min: 45.0e-6, max: 15.0e-6}",
+                      "fiber_generation.width_m.max", "must be greater than min"),
+    "placement box inside out": ("  element_length_m: 0.1e-3",
+                                 "  element_length_m: 0.1e-3\n  placement_lo_m: [0.0, 0.0, 2.0e-3]\n"
+                                 "  placement_hi_m: [3.0e-3, 3.0e-3, 1.0e-3]",
+                                 "fiber_generation.placement_hi_m", "must exceed placement_lo_m"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_GENERATION))
+def test_bad_distributions_exit_2_naming_the_field(tmp_path: Path, fiberform_cmd: list[str], case: str) -> None:
+    old, new, field, words = BAD_GENERATION[case]
+    assert old in SCENE
+    (tmp_path / "scene.yaml").write_text(SCENE.replace(old, new))
+    r = subprocess.run([*fiberform_cmd, "generate", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert field in r.stderr and words in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.yaml"]
+
+
+@pytest.mark.parametrize("csv, words", [
+    (None, "cannot read data_csv"),
+    ("length_m,curvature_alpha\n1.0e-3,0.95\n", "has no such column"),
+    ("length_m,width_m,curvature_alpha\n1.0e-3,30e-6,0.95\n1.2e-3,-2e-6,0.9\n", "1 value(s) outside (0, 0.01]"),
+], ids=["missing file", "missing column", "negative width"])
+def test_bad_measured_data_exit_2_before_anything_is_written(tmp_path: Path, fiberform_cmd: list[str],
+                                                             csv: str | None, words: str) -> None:
+    scene = SCENE.replace("  width_m: {kind: normal, mean: 30.0e-6, sd: 5.0e-6, min: 15.0e-6, max: 45.0e-6}",
+                          "  width_m: {kind: data}\n  data_csv: measured.csv")
+    (tmp_path / "scene.yaml").write_text(scene)
+    if csv is not None:
+        (tmp_path / "measured.csv").write_text(csv)
+    r = subprocess.run([*fiberform_cmd, "generate", "scene.yaml"], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert "fiber_generation." in r.stderr and words in r.stderr, r.stderr
+    assert not (tmp_path / "runs").exists()

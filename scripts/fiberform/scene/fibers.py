@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -83,16 +85,43 @@ class DistributionSpec(_Section):
 
     @model_validator(mode="after")
     def _check(self) -> DistributionSpec:
-        need = {"fixed": ("value",), "uniform": ("low", "high"), "normal": ("mean", "sd"),
-                "lognormal": ("mean", "sd"), "data": ()}[self.kind]
-        for name in need:
+        need = _KIND_FIELDS[self.kind]
+        for name in _KIND_FIELDS_REQUIRED[self.kind]:
             if getattr(self, name) is None:
                 raise scene_problem(name, f"required for kind {self.kind}")
+        for kind, names in _KIND_FIELDS.items():
+            for name in names:
+                if name not in need and getattr(self, name) is not None:
+                    used = " and ".join(k for k, n in _KIND_FIELDS.items() if name in n)
+                    raise scene_problem(name, f"only used with kind {used} (this one is {self.kind})",
+                                        getattr(self, name))
         if self.kind == "uniform" and not (self.high or 0) > (self.low or 0):
             raise scene_problem("high", "must be greater than low", self.high)
         if self.kind == "lognormal" and not (self.mean or 0) > 0:
             raise scene_problem("mean", "must be > 0 for lognormal", self.mean)
+        if self.min is not None and self.max is not None and not self.max > self.min:
+            raise scene_problem("max", "must be greater than min", self.max)
         return self
+
+    def support(self) -> tuple[float, float]:
+        """The interval its samples can fall in (a data column's: (-inf, inf), unknown here)."""
+        inf = float("inf")
+        lo, hi = {"fixed": (self.value, self.value), "uniform": (self.low, self.high),
+                  "normal": (-inf, inf), "lognormal": (math.ulp(0.0), inf), "data": (-inf, inf)}[self.kind]
+        assert lo is not None and hi is not None
+        if self.min is not None:
+            lo = max(lo, self.min)
+        if self.max is not None:
+            hi = min(hi, self.max)
+        return lo, hi
+
+
+#: the fields each distribution kind uses (min, max: every kind)
+_KIND_FIELDS: dict[str, tuple[str, ...]] = {
+    "fixed": ("value",), "uniform": ("low", "high"), "normal": ("mean", "sd"), "lognormal": ("mean", "sd"),
+    "data": ("column",),
+}
+_KIND_FIELDS_REQUIRED = {k: tuple(n for n in v if n != "column") for k, v in _KIND_FIELDS.items()}
 
 
 class FiberGenerationSection(_Section):
@@ -153,4 +182,35 @@ class FiberGenerationSection(_Section):
     def _check(self) -> FiberGenerationSection:
         if self.fines_fraction > 0 and self.fines_length_m is None:
             raise scene_problem("fines_length_m", "required when fines_fraction > 0")
+        for key, (lo, hi, closed_hi) in DISTRIBUTION_RANGES.items():
+            spec: DistributionSpec | None = getattr(self, key)
+            if spec is None:
+                continue
+            if spec.kind == "data":  # its column's values: checked by the generate stage (preflight)
+                if self.data_csv is None:
+                    raise scene_problem(key, "kind data needs fiber_generation.data_csv", spec.kind)
+                continue
+            s_lo, s_hi = spec.support()
+            if not (s_lo > lo and (s_hi <= hi if closed_hi else s_hi < hi)):
+                where = (f"the value {spec.value}" if spec.kind == "fixed" else
+                         f"[low, high] = [{spec.low}, {spec.high}]" if spec.kind == "uniform" and
+                         (spec.min is None and spec.max is None) else
+                         f"the samples (kind {spec.kind}, truncated to [min, max] = [{spec.min}, {spec.max}])")
+                need = (f"({lo:g}, {hi:g}{']' if closed_hi else ')'}"
+                        + ("" if spec.kind in ("fixed", "uniform") else ": truncate with min and max inside it"))
+                raise scene_problem(key, f"{where} must lie in {need}", spec.kind)
+        if self.placement_lo_m is not None and self.placement_hi_m is not None and not all(
+                h > lo for lo, h in zip(self.placement_lo_m, self.placement_hi_m, strict=False)):
+            raise scene_problem("placement_hi_m", "must exceed placement_lo_m in x, y and z", self.placement_hi_m)
         return self
+
+
+#: the allowed open-closed value ranges of the sampled quantities: (lower bound, exclusive; upper
+#: bound; whether the upper bound is included). A data column's values are checked when the
+#: generate stage reads the CSV (before anything is written).
+DISTRIBUTION_RANGES: dict[str, tuple[float, float, bool]] = {
+    "length_m": (0.0, 0.1, True),
+    "width_m": (0.0, 0.01, True),
+    "curvature_alpha": (0.0, 1.0, True),
+    "fines_length_m": (0.0, 0.1, True),
+}

@@ -28,7 +28,7 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import StageError
+from ..errors import ConfigError, StageError
 from ..fabric_geometry import segment_distances
 from ..fiber_io import (
     DATA_NAME, NODES_NAME, Fiber, fiber_preamble, outer_half_axes, quat_from_frames,
@@ -37,6 +37,7 @@ from ..fiber_io import (
 from ..fiber_sheet import lateral_period
 from ..inputs import LiggghtsInput
 from ..provenance import file_hash, write_dataset
+from ..scene.fibers import DISTRIBUTION_RANGES
 from ._stage import Stage, StageContext
 
 __all__ = [
@@ -461,6 +462,34 @@ class Generate(Stage):
     uses = ("seed", "domain", "fibers", "fiber_generation")
     products = (H5_NAME, DATA_NAME, NODES_NAME, INPUT_NAME)
     code_version = 2
+
+    def preflight(self, ctx: StageContext) -> None:
+        """The measured values of ``fiber_generation.data_csv`` (kind data), before anything is
+        written: the file, the columns the distributions name and their values' ranges
+        (fiberform.scene.fibers.DISTRIBUTION_RANGES); ConfigError (exit status 2) naming the field."""
+        g = getattr(ctx.scene, "fiber_generation", None)
+        if g is None:
+            return
+        specs = {key: getattr(g, key) for key in DISTRIBUTION_RANGES}
+        wanted = {key: spec.column or key for key, spec in specs.items() if spec is not None and spec.kind == "data"}
+        if not wanted:
+            return
+        path = ctx.scene_path.parent / g.data_csv
+        try:
+            data = read_csv_columns(path)
+        except StageError as exc:
+            raise ConfigError(f"fiber_generation.data_csv: {exc}") from None
+        for key, col in wanted.items():
+            lo, hi, closed = DISTRIBUTION_RANGES[key]
+            values = data.get(col)
+            if values is None or values.size == 0:
+                raise ConfigError(f"fiber_generation.{key}: kind data reads column {col!r} of {path}, which "
+                                  f"{'is empty' if values is not None else 'has no such column'} (columns: "
+                                  f"{', '.join(sorted(data)) or 'none'})")
+            bad = values[~((values > lo) & ((values <= hi) if closed else (values < hi)))]
+            if bad.size:
+                raise ConfigError(f"fiber_generation.{key}: column {col!r} of {path} holds {bad.size} value(s) "
+                                  f"outside ({lo:g}, {hi:g}{']' if closed else ')'}), e.g. {bad[0]:g}")
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
