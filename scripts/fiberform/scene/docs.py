@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import types
 import typing
 from typing import Any, Literal
 
@@ -17,8 +18,12 @@ from .loader import _model_in
 
 
 def _literal_values(annotation: Any) -> tuple[str, list[Any]] | None:
-    """('one of'|'subset of', values) for Literal and list[Literal] annotations."""
+    """('one of'|'subset of', values) for Literal and list[Literal] annotations, also when
+    optional (``Literal[...] | None``)."""
     origin = typing.get_origin(annotation)
+    if origin is typing.Union or origin is types.UnionType:
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        return _literal_values(args[0]) if len(args) == 1 else None
     if origin is Literal:
         return "one of", list(typing.get_args(annotation))
     if origin is list:
