@@ -257,22 +257,31 @@ def test_press_without_laydown_exits_2(tmp_path: Path, fiberform_cmd: list[str],
     assert not (tmp_path / "runs" / NAME / "press").exists()
 
 
+@pytest.mark.parametrize("mode", ["velocity", "pressure"])
 def test_one_and_two_ranks_press_the_same_sheet(sheet: Path, fiberform_cmd: list[str],
-                                                build_dir: Path) -> None:
+                                                build_dir: Path, mode: str) -> None:
+    """The same sheet, plate curve and (pressure mode) servo on 1 and 2 ranks: the plate's force and
+    the servo's stiffness bound are sums over the ranks' contacts (each rank moves its own copy of
+    the plate, so every rank must compute the same speed; until session 30 the bound was this
+    rank's contacts' alone)."""
     top, fab = _sheet_top(sheet), _fabric_top(sheet)
     target = 0.5 * (top - fab)
     xs = []
     for ranks in (1, 2):
-        proc = _press(sheet, fiberform_cmd, build_dir,
-                      f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {target!r}, "
-                      f"hold_time_s: 3.0e-4, output_interval_s: 1.0e-4, ranks: {ranks}}}",
-                      f"ranks{ranks}")
+        press = (f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {target!r}, "
+                 f"hold_time_s: 3.0e-4, output_interval_s: 1.0e-4, ranks: {ranks}}}" if mode == "velocity" else
+                 "{mode: pressure, target_pressure_Pa: 2.0, pressure_rate_Pa_s: 4.0e+3, hold_time_s: 4.0e-4, "
+                 "release_time_s: 3.0e-4, plate_speed_m_s: 0.02, output_interval_s: 1.0e-4, "
+                 f"ranks: {ranks}}}")
+        proc = _press(sheet, fiberform_cmd, build_dir, press, f"ranks{ranks}_{mode}")
         assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
         with h5py.File(sheet / "runs" / NAME / "press" / "press.h5", "r") as h:
-            xs.append((h["sheet/x"][...], h["sheet/fiber_id"][...], h["curve/plate_force"][...]))
-    (x1, id1, f1), (x2, id2, f2) = xs
+            xs.append((h["sheet/x"][...], h["sheet/fiber_id"][...], h["curve/plate_force"][...],
+                       h["curve/plate_z"][...]))
+    (x1, id1, f1, z1), (x2, id2, f2, z2) = xs
     assert np.array_equal(id1, id2)
     assert np.max(np.abs(x1 - x2)) < 1e-9, np.max(np.abs(x1 - x2))
+    assert np.max(np.abs(z1 - z2)) < 1e-9, np.max(np.abs(z1 - z2))
     scale = max(1e-12, float(np.max(np.abs(f1))))
     assert np.max(np.abs(f1 - f2)) <= 1e-6 * scale, (np.max(np.abs(f1 - f2)), scale)
     assert math.isfinite(scale)

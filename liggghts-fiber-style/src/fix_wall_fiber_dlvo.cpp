@@ -114,9 +114,9 @@ void FixWallFiberDlvo::post_force(int vflag) {
     return;
   }
   double gap = 0.0;
-  double stiff = 0.0;
-  const fiberform::Vec3 t = model_->take_total(gap, stiff);
-  if (area_ > 0) k_bound_ = fiberform::physics::press::stiffness_bound(k_bound_, stiff / area_, kStiffnessDecay);
+  // this rank's contacts' stiffness, summed over the ranks with the force (reduce_force): every
+  // rank's servo must see the same bound, or each rank would move its own copy of the plate
+  const fiberform::Vec3 t = model_->take_total(gap, stiff_local_);
   force_sum_[0] = t.x;
   force_sum_[1] = t.y;
   force_sum_[2] = t.z;
@@ -174,6 +174,7 @@ void FixWallFiberDlvo::after_pass() {
   force_reduced_ = false;
   if (area_ <= 0) return;  // no servo: the force is reduced only when output (compute_vector)
   reduce_force();
+  if (newton_) k_bound_ = fiberform::physics::press::stiffness_bound(k_bound_, stiff_ / area_, kStiffnessDecay);
   const double n[3] = {plane_.normal.x, plane_.normal.y, plane_.normal.z};
   pressure_ = fiberform::physics::press::plate_pressure(force_, n, area_);
   // the schedule's clock starts at the first contact (any force); before it the plate approaches
@@ -193,10 +194,15 @@ void FixWallFiberDlvo::after_pass() {
   plane_.velocity = u * plane_.normal;
 }
 
-/* The contact force on the fibers summed over the ranks (collective; once per pass). */
+/* The contact force on the fibers and (implicit_force newton) the plate contacts' stiffness, summed
+   over the ranks (collective; once per pass). */
 void FixWallFiberDlvo::reduce_force() {
   if (force_reduced_) return;
-  MPI_Allreduce(force_sum_, force_, 3, MPI_DOUBLE, MPI_SUM, world);
+  const double local[4] = {force_sum_[0], force_sum_[1], force_sum_[2], stiff_local_};
+  double total[4];
+  MPI_Allreduce(local, total, 4, MPI_DOUBLE, MPI_SUM, world);
+  for (int k = 0; k < 3; ++k) force_[k] = total[k];
+  stiff_ = total[3];
   force_reduced_ = true;
 }
 

@@ -57,6 +57,8 @@ class FixWallFiberDlvo : public FiberContactFix {
   // implicit_force newton: the servo's gain bound (physics/press_servo.h): the plate contacts'
   // stiffness per area (Pa/m), peak-held with a decay per step; one step closes <= 1/kServoSteps
   double k_bound_ = 0.0;
+  double stiff_local_ = 0.0;  // this rank's plate contacts' stiffness at the last step (N/m)
+  double stiff_ = 0.0;        // ... summed over the ranks (reduce_force)
   fiberform::physics::press::GainAdapt adapt_;  // the gain's multiplier for soft sheets
   static constexpr double kStiffnessDecay = 0.99, kServoSteps = 4.0;
   // implicit_force newton: the plane as a static (moving) body of the fibers' Newton solves
