@@ -139,6 +139,50 @@ def test_thesis_law_by_default() -> None:
     assert other and not any(" terms vdw,es,steric " in f" {ln} " for ln in other), other
 
 
+LAW = {("fluid", "temperature_K"): ("temperature", 310.0), ("contact", "hamaker_J"): ("hamaker", 1.0e-20),
+       ("contact", "ionic_strength_mol_m3"): ("ionic_strength", 2.0),
+       ("contact", "surface_potential_V"): ("psi", -0.03), ("contact", "cutoff_m"): ("h_cut", 3.0e-8)}
+
+
+def _law_lines(text: str) -> list[str]:
+    """The generated commands that set up a contact law: the fiber-fiber pair style and every fix
+    of a body the fibers touch (yarns, side planes, press plate)."""
+    return [ln for ln in text.splitlines() if ln.startswith("pair_style fiber/dlvo")
+            or (ln.startswith("fix") and ("wall/fiber/yarns" in ln or "wall/fiber/dlvo" in ln))]
+
+
+@pytest.mark.parametrize("walls", ["wall_fiber_dlvo", "fiber_yarns"])
+@pytest.mark.parametrize("key", sorted(LAW), ids=lambda k: ".".join(k))
+def test_law_parameters_reach_every_contact(key: tuple[str, str], walls: str) -> None:
+    """One law for fibers, yarns, side planes and the press plate (the mission; thesis sec. 2.4):
+    a changed law parameter (fluid temperature, Hamaker constant, ionic strength, surface
+    potential, cut-off) reaches every one of them with its value, in the lay-down's input and the
+    press's. (Until session 30 only the pair style got the contact section's values and no
+    command the temperature: the yarns and walls kept the law's defaults.)"""
+    from fiberform.stages import press
+
+    section, field = key
+    word, value = LAW[key]
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["laydown"]["walls"] = walls
+    data.setdefault(section, {})[field] = value
+    scene = parse_scene(data, "law.yaml")
+    lines = _law_lines(laydown.render_input(scene, U_S))
+    assert len(lines) == 6, lines  # pair style, yarns, four side planes
+    data["laydown"].update({"yarn_contact": "newton", "fiber_contact": "newton"})
+    data["laydown"].pop("contact_integrator")
+    data["contact"].pop("integrator")
+    data["press"] = {"mode": "velocity", "target_thickness_m": 20.0e-6}
+    scene = parse_scene(data, "law.yaml")
+    plan = press.PressPlan(scene, sheet_top=2.677e-3, fabric_top=2.637e-3, t_min=20e-6)
+    pressed = _law_lines(press.build_input(scene, plan))
+    assert any(" plate " in f" {ln} " for ln in pressed), pressed
+    lines += pressed
+    for ln in lines:
+        words = ln.split()
+        assert word in words and float(words[words.index(word) + 1]) == value, (word, ln)
+
+
 # ---- permeability (issue 12): every field reaches the box case, the run options or the output --
 
 PERM_ALTERNATIVES: dict[str, object] = {

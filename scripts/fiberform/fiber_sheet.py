@@ -29,7 +29,7 @@ from .inputs import STAR, LiggghtsInput, Token, dump_format, file_token, fix_ref
 from .products import (
     FIBERS_H5, Chain, Yarns, read_fiber_outer_axes, read_sheet_chains, read_yarns, sheet_chains,
 )
-from .scene import Scene
+from .scene import FluidSection, Scene
 
 Array = npt.NDArray[np.float64]
 
@@ -51,12 +51,31 @@ def contact_integrator_words(ld: Any) -> list[object]:
     return ["integrator", "substep", ld.contact_substeps]
 
 
-def static_body_words(ld: Any) -> list[object]:
+def law_words(scene: Scene) -> list[object]:
+    """The contact law's parameters from the scene, the same for every body the fibers touch
+    (fibers: pair_style fiber/dlvo; yarns, side planes, press plate: the fixes): the fluid's
+    temperature (kT and the Debye length) and the contact section's Hamaker constant, ionic
+    strength, surface potential and cut-off; an absent one keeps the law's default
+    (docs/models/contact.md)."""
+    fl = scene.fluid or FluidSection()
+    out: list[object] = ["temperature", fl.temperature_K]
+    c = scene.contact
+    if c is not None:
+        for word, value in (("hamaker", c.hamaker_J), ("ionic_strength", c.ionic_strength_mol_m3),
+                            ("psi", c.surface_potential_V), ("h_cut", c.cutoff_m)):
+            if value is not None:
+                out += [word, value]
+    return out
+
+
+def static_body_words(scene: Scene) -> list[object]:
     """The keywords that make yarns (and the ``fiber_yarns`` side planes) act as the laydown
-    section sets them: law terms, integrator, implicit_force mode, Coulomb friction (and its stick
-    damping inside the Newton solve)."""
+    section sets them: law terms and parameters (:func:`law_words`), integrator, implicit_force
+    mode, Coulomb friction (and its stick damping inside the Newton solve)."""
+    ld = scene.laydown
+    assert ld is not None
     newton = ld.yarn_contact_mode == "newton"
-    words: list[object] = ["terms", ident_list(ld.terms), *contact_integrator_words(ld),
+    words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene), *contact_integrator_words(ld),
                            "implicit_force", "newton" if newton else "impulse",
                            "friction", ld.friction_coefficient]
     if newton and ld.friction_coefficient > 0.0:
@@ -77,15 +96,7 @@ def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
         out = ["integrator", c.integrator]
         if c.integrator == "substep":
             out.append(c.substeps)
-    out += ["terms", ident_list(c.terms)]
-    if c.hamaker_J is not None:
-        out += ["hamaker", c.hamaker_J]
-    if c.ionic_strength_mol_m3 is not None:
-        out += ["ionic_strength", c.ionic_strength_mol_m3]
-    if c.surface_potential_V is not None:
-        out += ["psi", c.surface_potential_V]
-    if c.cutoff_m is not None:
-        out += ["h_cut", c.cutoff_m]
+    out += ["terms", ident_list(c.terms), *law_words(scene)]
     if c.points_per_element is not None and mode != "newton":
         out += ["points", c.points_per_element]
     ld = scene.laydown
@@ -131,7 +142,7 @@ def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
         pass
     elif ld.walls == "fiber_yarns":  # the yarns' law, mode and friction (docs/stages/laydown.md)
         for k, p in enumerate(planes):
-            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, *static_body_words(ld))
+            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, *static_body_words(scene))
     elif ld.walls == "wall_gran":  # stock LIGGGHTS granular walls (comparison option)
         for name, style, value in WALL_GRAN_MATERIAL:
             s.command("fix", name, "all", "property/global", style, *value)
@@ -142,9 +153,9 @@ def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
     else:  # the contact styles' own wall fix, one per plane
         for k, p in enumerate(planes):
             s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, "terms",
-                      ident_list(ld.terms), *contact_integrator_words(ld))
+                      ident_list(ld.terms), *law_words(scene), *contact_integrator_words(ld))
     s.command("fix", YARNS_FIX, "all", "wall/fiber/yarns", "yarns", file_token(yarns_file),
-              *static_body_words(ld))
+              *static_body_words(scene))
     c = scene.contact
     if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
         s.command("pair_style", "fiber/dlvo", *pair_options(scene, ld.fiber_contact_mode))

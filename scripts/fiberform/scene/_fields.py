@@ -17,6 +17,8 @@ MAX_SCENE_BYTES = 1 << 20
 
 #: json_schema_extra key of fields left out of the stage hashes at their default (quantity)
 HASHED_AT_DEFAULT = "hashed_at_default"
+#: json_schema_extra key of fields whose listed values enter the stage hashes as other values (quantity)
+HASHED_AS = "hashed_as"
 
 # --------------------------------------------------------------------------------------------
 # Field helpers
@@ -46,16 +48,22 @@ def quantity(
     lt: float | None = None,
     le: float | None = None,
     hashed_at_default: bool = True,
+    hashed_as: dict[float, float] | None = None,
 ) -> Any:
     """A numeric field: ``meaning`` and ``unit`` go into the description (``1`` = dimensionless).
 
     ``hashed_at_default=False``: the field is left out of the stage hashes while it holds its
     default (:func:`fiberform.scene.model.section_hash`). For fields added to a section whose
-    default reproduces what the stage did before they existed: finished products stay up to date."""
+    default reproduces what the stage did before they existed: finished products stay up to date.
+    ``hashed_as`` {value: recorded}: the value enters the stage hashes as ``recorded``; for a field
+    whose earlier versions recorded ``recorded`` in the hashes while the stage computed with
+    ``value`` (a field that reached nothing): those products stay up to date, as they should."""
     rng = _range_text(gt, ge, lt, le)
     extra: dict[str, Any] = {"unit": unit, "meaning": meaning, "range": rng or "any"}
     if not hashed_at_default:
         extra[HASHED_AT_DEFAULT] = False
+    if hashed_as:
+        extra[HASHED_AS] = [[float(k), float(v)] for k, v in hashed_as.items()]
     return Field(
         default,
         description=f"{meaning} [{unit}]",

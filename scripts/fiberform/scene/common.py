@@ -44,11 +44,16 @@ class FluidSection(_Section):
         default=[0.0, 0.0, -9.81],
     )
     temperature_K: float = quantity(
-        "Fluid temperature (enters thermal energy kT of DLVO terms)",
+        "Fluid temperature: the thermal energy kT and the Debye length of the contact law's "
+        "electrostatic term (permittivity: water's at 25 C, 78.5)",
         "K",
-        default=293.15,
+        default=298.15,
         ge=273.15,
         le=373.15,
+        # until session 30 the default read 293.15 K but reached nothing: the law kept its own
+        # 298.15 K. The products made then hold 293.15 in their hashes, so the default hashes as
+        # that: it is what they were computed with.
+        hashed_as={298.15: 293.15},
     )
 
 

@@ -13,7 +13,7 @@ from typing import Any, Literal
 from pydantic import Field, ValidationError, model_validator
 
 from ..inputs import IDENTIFIER_PATTERN
-from ._fields import HASHED_AT_DEFAULT, Identifier, RelativePath, _Section, choice, quantity, scene_problem
+from ._fields import HASHED_AS, HASHED_AT_DEFAULT, Identifier, RelativePath, _Section, choice, quantity, scene_problem
 from .common import ContactSection, DomainSection, FluidSection, RunSection
 from .fibers import FiberGenerationSection, FibersSection
 from .particles import DemoParticlesSection
@@ -181,14 +181,20 @@ SECTIONS: tuple[str, ...] = (
 
 def _hash_neutral_defaults(section: Any, data: dict[str, Any]) -> None:
     """Drop from a section's dumped ``data`` the fields declared ``hashed_at_default=False``
-    (:func:`._fields.quantity`) that hold their default."""
+    (:func:`._fields.quantity`) that hold their default, and record the values of fields declared
+    ``hashed_as`` as declared."""
     if not isinstance(section, _Section):
         return
     for name, info in type(section).model_fields.items():
         extra = info.json_schema_extra
-        if (isinstance(extra, dict) and extra.get(HASHED_AT_DEFAULT) is False and name in data
-                and getattr(section, name) == info.default):
+        if not isinstance(extra, dict) or name not in data:
+            continue
+        if extra.get(HASHED_AT_DEFAULT) is False and getattr(section, name) == info.default:
             del data[name]
+            continue
+        for value, recorded in extra.get(HASHED_AS, ()):
+            if data[name] == value:
+                data[name] = recorded
 
 
 def section_hash(scene: Scene, names: Iterable[str]) -> str:

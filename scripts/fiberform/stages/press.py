@@ -48,7 +48,7 @@ from ..errors import ConfigError, SceneError, StageError
 from ..fiber_io import NODES_NAME, fiber_preamble, laydown_beam_options, write_nodes_subset
 from ..fiber_sheet import (
     YARNS_FIX, Array, contact_commands, contact_integrator_words, contact_yarns, element_clearance,
-    fiber_fiber_gap, frame_fibers, frame_quaternions, lateral_period, node_dump_columns, node_extents,
+    fiber_fiber_gap, frame_fibers, frame_quaternions, lateral_period, law_words, node_dump_columns, node_extents,
     product_thickness_above_fabric, sheet_thickness, sheet_thickness_above_fabric,
     solid_fraction_profile, static_force_refs, wrap_chains, write_sheet_png,
     write_sheet_vtu, write_yarns,
@@ -269,7 +269,7 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
     if p.restart_every:
         s.command("restart", p.restart_every, step_file_token(RESTART_STEM, RESTART_EXT))
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
-    plate_words: list[object] = ["terms", ident_list(ld.terms)] + (
+    plate_words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene)] + (
         ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
         else contact_integrator_words(ld))
     cx, cy = p.centre
