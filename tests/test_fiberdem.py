@@ -123,6 +123,30 @@ def test_bad_input_fails_with_liggghts_error(tmp_path: Path) -> None:
     assert "K (N/m) must be a finite number > 0" in proc.stdout + proc.stderr
 
 
+BOX = "units si\natom_style sphere\nregion b block 0 1 0 1 0 1\ncreate_box 1 b\n"
+
+
+@pytest.mark.parametrize("command, words", [
+    ("pair_style fiber/dlvo steric_terms S1,s2", "steric_terms: 'S1,s2' is not a comma list of distinct terms"),
+    ("pair_style fiber/dlvo steric_terms s1,s1", "steric_terms: 's1,s1' is not a comma list of distinct terms"),
+    ("pair_style fiber/dlvo integrator substep 2.5", "integrator substep: '2.5' is not a whole number in [1, 1000000]"),
+    ("pair_style fiber/dlvo points 0", "points: '0' is not a whole number in [1, 100000]"),
+    ("fix s all fiber/settle 1.0e-3 2.5", "M: '2.5' is not a whole number in [1, 2000000000]"),
+    ("fix r all fiber/remove below 0.0 every 10.5", "every: '10.5' is not a whole number in [1, 2000000000]"),
+], ids=["unknown steric term", "repeated steric term", "fractional substeps", "zero points", "fractional M",
+        "fractional every"])
+def test_bad_style_arguments_are_refused_not_truncated(tmp_path: Path, command: str, words: str) -> None:
+    """A count given as a fraction (was truncated) and an unknown or repeated steric term (an
+    unknown one used to switch the others off silently) end the run with a message naming the
+    keyword."""
+    bad = tmp_path / "in.bad"
+    bad.write_text(BOX + command + "\n")
+    proc = subprocess.run([str(_fiberdem()), "-in", str(bad), "-log", "none"], cwd=tmp_path,
+                          env=_env(), capture_output=True, text=True, errors="replace", timeout=60)
+    assert proc.returncode != 0
+    assert words in proc.stdout + proc.stderr, proc.stdout[-1500:] + proc.stderr[-1500:]
+
+
 def test_stock_liggghts_with_preload_shim_matches_fiberdem(tmp_path: Path) -> None:
     """The LD_PRELOAD shim makes Debian's stock `liggghts` binary accept our styles; without it the
     stock binary does not know them."""

@@ -10,6 +10,7 @@
 #include "force.h"
 #include "group.h"
 #include "lammps.h"
+#include "style_args.h"
 
 using namespace LAMMPS_NS;
 
@@ -50,7 +51,8 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
     if (!std::strcmp(v, "none")) { c.integrator = IntegratorKind::None; return 2; }
     if (!std::strcmp(v, "substep")) {
       c.integrator = IntegratorKind::Substep;
-      c.nsub = static_cast<int>(num(2));
+      if (iarg + 2 >= narg) lmp->error->all(FLERR, "integrator substep: expected the number of sub-steps N");
+      c.nsub = static_cast<int>(parse_count(lmp->error, style, "integrator substep", arg[iarg + 2], 1, 1000000));
       return 3;
     }
     lmp->error->all(FLERR, "integrator: expected cvode | substep N | none");
@@ -93,11 +95,26 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
   }
   if (!std::strcmp(kw, "steric_terms")) {
     if (iarg + 1 >= narg) lmp->error->all(FLERR, "steric_terms: expected a comma list of s1..s4");
-    std::string list = std::string(",") + arg[iarg + 1] + ",";
-    L.steric.s1 = list.find(",s1,") != std::string::npos;
-    L.steric.s2 = list.find(",s2,") != std::string::npos;
-    L.steric.s3 = list.find(",s3,") != std::string::npos;
-    L.steric.s4 = list.find(",s4,") != std::string::npos;
+    // a comma list of distinct terms s1..s4 (an unknown or repeated word is an error: 'S1,s2' once
+    // switched S1 off silently)
+    bool on[4] = {false, false, false, false};
+    const std::string list = arg[iarg + 1];
+    std::size_t pos = 0;
+    while (true) {
+      const std::size_t end = list.find(',', pos);
+      const std::string word = list.substr(pos, end == std::string::npos ? std::string::npos : end - pos);
+      const int k = (word.size() == 2 && word[0] == 's' && word[1] >= '1' && word[1] <= '4') ? word[1] - '1' : -1;
+      if (k < 0 || on[k])
+        lmp->error->all(FLERR, error_text(std::string(style) + ": steric_terms: '" + list +
+                                          "' is not a comma list of distinct terms s1, s2, s3, s4"));
+      on[k] = true;
+      if (end == std::string::npos) break;
+      pos = end + 1;
+    }
+    L.steric.s1 = on[0];
+    L.steric.s2 = on[1];
+    L.steric.s3 = on[2];
+    L.steric.s4 = on[3];
     return 2;
   }
   if (!std::strcmp(kw, "s1_damping")) { L.steric.s1_damping = yesno(lmp, style, kw, iarg + 1, narg, arg); return 2; }
@@ -139,7 +156,8 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
       c.h_match = num(2);
       return 3;
     }
-    c.npoints = static_cast<int>(num(1));
+    if (iarg + 1 >= narg) lmp->error->all(FLERR, "points: expected N or auto H");
+    c.npoints = static_cast<int>(parse_count(lmp->error, style, "points", arg[iarg + 1], 1, 100000));
     return 2;
   }
   if (!std::strcmp(kw, "self")) { c.self_contact = yesno(lmp, style, kw, iarg + 1, narg, arg); return 2; }

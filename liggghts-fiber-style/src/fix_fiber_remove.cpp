@@ -40,8 +40,7 @@ FixFiberRemove::FixFiberRemove(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, nar
       z_ = v;
       have_z = true;
     } else if (kw == "every") {
-      if (!(v >= 1.0 && v <= 2.0e9)) error->all(FLERR, "fix fiber/remove: every must be an integer in [1, 2e9]");
-      every_ = static_cast<int>(v);
+      every_ = static_cast<int>(fiberform::parse_count(error, style, kw, arg[iarg + 1], 1, 2000000000));
     } else {
       error->all(FLERR, fiberform::error_text(std::string(style) + ": unknown keyword '" + kw +
                                               "' (see docs/styles/fix_fiber_remove.md)"));

@@ -30,10 +30,8 @@ FixFiberSettle::FixFiberSettle(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, nar
   const char *style = "fix fiber/settle";
   if (narg < 5) error->all(FLERR, "fix fiber/settle: expected 'fix ID group fiber/settle V M [keyword value ...]'");
   speed_ = fiberform::parse_finite(error, style, "V", arg[3]);
-  const double m = fiberform::parse_finite(error, style, "M", arg[4]);
-  if (!(speed_ > 0.0) || !(m >= 1.0 && m <= 2.0e9))
-    error->all(FLERR, "fix fiber/settle: needs V > 0 (m/s) and an integer M in [1, 2e9] (steps)");
-  nevery = static_cast<int>(m);
+  if (!(speed_ > 0.0)) error->all(FLERR, "fix fiber/settle: needs V > 0 (m/s)");
+  nevery = static_cast<int>(fiberform::parse_count(error, style, "M", arg[4], 1, 2000000000));
   int iarg = 5;
   while (iarg < narg) {
     const std::string kw = arg[iarg];

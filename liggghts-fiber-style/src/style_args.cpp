@@ -26,6 +26,17 @@ double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std
   return v;
 }
 
+long long parse_count(LAMMPS_NS::Error *error, const std::string &style, const std::string &keyword,
+                      const char *text, long long lo, long long hi) {
+  char *end = nullptr;
+  const double v = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(v) || v != std::floor(v) || v < static_cast<double>(lo) ||
+      v > static_cast<double>(hi))
+    error->all(FLERR, error_text(style + ": " + keyword + ": '" + text + "' is not a whole number in [" +
+                                 std::to_string(lo) + ", " + std::to_string(hi) + "]"));
+  return static_cast<long long>(v);
+}
+
 void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *message) {
   const char *text = error_text(message);
   if (lmp->screen) {

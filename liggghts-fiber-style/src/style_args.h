@@ -24,6 +24,12 @@ const char *error_text(const std::string &message);
 double parse_finite(LAMMPS_NS::Error *error, const std::string &style, const std::string &keyword,
                     const char *text);
 
+// A whole number in [lo, hi] from an input-script word, or error->all() naming the style and
+// keyword: "<style>: <keyword>: '<text>' is not a whole number in [lo, hi]" (1.5 is refused, not
+// truncated).
+long long parse_count(LAMMPS_NS::Error *error, const std::string &style, const std::string &keyword,
+                      const char *text, long long lo, long long hi);
+
 // error->one() for a condition found on one rank only, with the message written and FLUSHED to the
 // screen and log first: LIGGGHTS 3.8 calls MPI_Abort without flushing, so a message on a piped
 // screen (a run started by Python) or in the log file is otherwise lost.
