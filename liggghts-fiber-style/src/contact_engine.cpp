@@ -109,6 +109,11 @@ int ContactEngine::npoints_for(double len, double r) const {
   return physics::points_per_element(len, r, r, cfg.h_match);
 }
 
+double ContactEngine::rep_radius(int i, int j) const {
+  return cfg.section == Section::Circle ? 0.5 * (atom->radius[i] + atom->radius[j])
+                                        : 0.5 * std::min(cfg.width, cfg.thickness);
+}
+
 bool ContactEngine::make_element(int i, const NodeData &nd, Element &e) const {
   const int j = next_node(i);
   if (j < 0) return false;
@@ -122,12 +127,11 @@ bool ContactEngine::make_element(int i, const NodeData &nd, Element &e) const {
   const Vec3 d = e.xb - e.xa;
   e.len = norm(d);
   e.axis = e.len > 0 ? (1.0 / e.len) * d : Vec3{1, 0, 0};
+  e.rep_radius = rep_radius(i, j);
   if (cfg.section == Section::Circle) {
-    e.radius = 0.5 * (atom->radius[i] + atom->radius[j]);
-    e.rep_radius = e.radius;
+    e.radius = e.rep_radius;
   } else {
     e.radius = 0.0;
-    e.rep_radius = 0.5 * std::min(cfg.width, cfg.thickness);
     e.e_t = physics::rect_thickness_dir(e.axis, cfg.up);
   }
   e.n = npoints_for(e.len, e.rep_radius);
@@ -169,11 +173,7 @@ namespace {
 inline std::uint64_t point_id(int tag, int k) { return (std::uint64_t(tag) << 20) | std::uint64_t(k); }
 // distance from p to the segment a-b
 double segment_distance(Vec3 a, Vec3 b, Vec3 p) {
-  const Vec3 e = b - a;
-  const double L2 = dot(e, e);
-  double t = L2 > 0 ? dot(p - a, e) / L2 : 0.0;
-  t = t < 0 ? 0 : (t > 1 ? 1 : t);
-  return norm(lerp(a, b, t) - p);
+  return norm(lerp(a, b, physics::closest_param_point_segment(a, b, p)) - p);
 }
 }  // namespace
 
@@ -213,10 +213,7 @@ bool ContactEngine::mutual_closest(const Element &A, int k, const Element &B, in
     if (!further) return false;
     const int tag = atom->tag[i];
     if (same_fiber && std::abs(tag - B.tag) < 2) return false;  // self contact: not adjacent elements
-    const double len = norm(xb - xa);
-    double r = 0.5 * (atom->radius[i] + atom->radius[j]);
-    if (cfg.section == Section::Rect) r = 0.5 * std::min(cfg.width, cfg.thickness);
-    const int n = npoints_for(len, r);
+    const int n = npoints_for(norm(xb - xa), rep_radius(i, j));
     const int kk = physics::closest_point_index(xa, xb, n, p);
     const double d = norm(lerp(xa, xb, physics::point_fraction(kk, n)) - p);
     return d < dist || (d == dist && point_id(tag, kk) < idk);

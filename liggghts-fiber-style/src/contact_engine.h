@@ -143,6 +143,9 @@ class ContactEngine : protected LAMMPS_NS::Pointers {
   PointState point_state(const Element &e, int k, const NodeData &nd) const;
   void apply(const Element &e, int k, Vec3 r_off, Vec3 fpre, Vec3 fpost, const NodeSinks &out, bool post);
   int npoints_for(double len, double r) const;
+  // the representative radius of the element of nodes i, j (m: a circle's mean node radius, a
+  // rectangle's half thickness; thesis 2.4.3) and its number of contact points (length len)
+  double rep_radius(int i, int j) const;
 
   ContactIntegrator integrator_;
   LAMMPS_NS::FixFiberBeam *beam_ = nullptr;

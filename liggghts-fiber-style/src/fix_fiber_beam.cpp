@@ -301,6 +301,10 @@ void FixFiberBeam::section_radii(int i, double r[4]) const {
   for (int k = 0; k < 4; ++k) r[k] = node_[i][A1 + k];
 }
 
+void FixFiberBeam::element_radii(int i, int j, double r[4]) const {
+  bm::element_radii(&node_[i][A1], &node_[j][A1], r);
+}
+
 double FixFiberBeam::contact_reach(int i) const {
   return contact_rect(i) ? std::hypot(node_[i][A1], node_[i][A2]) : contact_radius(i);
 }
@@ -455,9 +459,9 @@ void FixFiberBeam::reset_dt() {
 ------------------------------------------------------------------------- */
 
 void FixFiberBeam::element_section(int i, int j, double *area, double inertia[3], double stiff[6]) const {
-  const double a1 = 0.5 * (node_[i][A1] + node_[j][A1]), a2 = 0.5 * (node_[i][A2] + node_[j][A2]);
-  const double b1 = 0.5 * (node_[i][B1] + node_[j][B1]), b2 = 0.5 * (node_[i][B2] + node_[j][B2]);
-  const bm::Section s = bm::hollow_ellipse(a1, a2, b1, b2);
+  double r[4];
+  element_radii(i, j, r);
+  const bm::Section s = bm::hollow_ellipse(r[0], r[1], r[2], r[3]);
   const bm::Stiffness C = bm::section_stiffness(s, E_, G_, kshear_, stiff_scale_);
   *area = s.A;
   inertia[0] = s.I1;
@@ -553,9 +557,9 @@ void FixFiberBeam::compute_critical_steps(bool print) {
     if (node_[i][HASREF] < 0.5) continue;
     const int j = neighbour_node(lmp, i, +1);
     if (j < 0) missing_neighbour(lmp, i, +1);
-    const double a1 = 0.5 * (node_[i][A1] + node_[j][A1]), a2 = 0.5 * (node_[i][A2] + node_[j][A2]);
-    const double b1 = 0.5 * (node_[i][B1] + node_[j][B1]), b2 = 0.5 * (node_[i][B2] + node_[j][B2]);
-    const bm::Section s = bm::hollow_ellipse(a1, a2, b1, b2);
+    double r[4];
+    element_radii(i, j, r);
+    const bm::Section s = bm::hollow_ellipse(r[0], r[1], r[2], r[3]);
     const bm::Stiffness C{vec(&node_[i][CGX]), vec(&node_[i][CKX])};
     const bm::CriticalSteps c = bm::critical_steps(s, C, node_[i][L0], rho_, inertia_scale_, t_damp_);
     dt[0] = std::fmin(dt[0], c.axial);

@@ -86,6 +86,8 @@ class FixFiberBeam : public Fix {
   void frame(int i, double t1[3], double t2[3], double t3[3]) const;
   // outer and inner semi-axes a1, a2, b1, b2 of the node's section, m
   void section_radii(int i, double r[4]) const;
+  // ... of the element i -> j: the two nodes' averaged (beam::element_radii)
+  void element_radii(int i, int j, double r[4]) const;
   // the larger outer half-axis (m): the convergence length of the Newton solve, and the radius of a
   // circular section in contacts inside it
   double contact_radius(int i) const { return node_[i][A1] > node_[i][A2] ? node_[i][A1] : node_[i][A2]; }

@@ -17,6 +17,7 @@
 #include "error.h"
 #include "modify.h"
 #include "fix_fiber_beam.h"
+#include "physics/beam.h"
 #include "physics/drag.h"
 #include "physics/flow_grid.h"
 #include "update.h"
@@ -115,13 +116,10 @@ void FixFiberDrag::setup(int vflag) { post_force(vflag); }
    whole element); the return value is the element's displaced (wall) volume (m3). */
 double FixFiberDrag::element_force(int i, int j, double fe[3], double *jac) const {
   double **x = atom->x, **v = atom->v;
-  double ri[4], rj[4];
-  beam_->section_radii(i, ri);
-  beam_->section_radii(j, rj);
   double r[4];
-  for (int k = 0; k < 4; ++k) r[k] = 0.5 * (ri[k] + rj[k]);
+  beam_->element_radii(i, j, r);
   const double d = r[0] + r[1];  // mean of the two outer diameters 2 a1, 2 a2
-  const double area = M_PI * (r[0] * r[1] - r[2] * r[3]);
+  const double area = fiberform::physics::beam::hollow_ellipse_area(r[0], r[1], r[2], r[3]);
   double e[3], c[3], vc[3];
   for (int k = 0; k < 3; ++k) {
     e[k] = x[j][k] - x[i][k];

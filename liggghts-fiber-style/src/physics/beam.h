@@ -179,9 +179,15 @@ inline double ellipse_torsion(double a, double b) {
   if (a <= 0 || b <= 0) return 0.0;
   return kPi * a * a * a * b * b * b / (a * a + b * b);
 }
+// The area of the hollow elliptical section (m^2): outer half-axes a1, a2, inner b1, b2.
+inline double hollow_ellipse_area(double a1, double a2, double b1, double b2) { return kPi * (a1 * a2 - b1 * b2); }
+// An element's section radii a1, a2, b1, b2 (m): those of its two nodes averaged.
+inline void element_radii(const double ri[4], const double rj[4], double r[4]) {
+  for (int k = 0; k < 4; ++k) r[k] = 0.5 * (ri[k] + rj[k]);
+}
 inline Section hollow_ellipse(double a1, double a2, double b1, double b2) {
   Section s{};
-  s.A = kPi * (a1 * a2 - b1 * b2);
+  s.A = hollow_ellipse_area(a1, a2, b1, b2);
   s.I1 = 0.25 * kPi * (a1 * a2 * a2 * a2 - b1 * b2 * b2 * b2);
   s.I2 = 0.25 * kPi * (a1 * a1 * a1 * a2 - b1 * b1 * b1 * b2);
   s.J = ellipse_torsion(a1, a2) - ellipse_torsion(b1, b2);

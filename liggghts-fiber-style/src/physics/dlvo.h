@@ -42,15 +42,8 @@ inline double vdw_force_slope(double A, double r1, double r2, double h) {
   return A * reduced_radius(r1, r2) / (3.0 * h * h * h);
 }
 
-// eq. 2.23, the Hamaker energy of two spheres (J). Finite radii only.
-inline double hamaker_energy(double A, double r1, double r2, double h) {
-  const double a = 2 * r1, b = 2 * r2;
-  return -A / 6.0 *
-         (2 * r1 * r2 / (h * (h + a + b)) + 2 * r1 * r2 / ((h + a) * (h + b)) +
-          std::log(h * (h + a + b) / ((h + a) * (h + b))));
-}
-
-// F = -dV/dh of eq. 2.23 and its slope dF/dh, analytic. For r2 = inf the sphere-plane limit
+// F = -dV/dh of eq. 2.23 (the Hamaker energy of two spheres; tests/test_dlvo.cpp differentiates
+// its own copy of V numerically) and its slope dF/dh, analytic. For r2 = inf the sphere-plane limit
 // F = -A r1 / 6 * [1/h^2 - 1/(h+2r1)^2] - ... is used (Hamaker sphere-plate, V = -A/6[r/h + r/(h+2r)
 // + ln(h/(h+2r))]).
 struct ForceAndSlope {
