@@ -94,6 +94,12 @@ def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], 
         alive = processes_under(work)
         assert not alive, f"left running after SIGTERM: {alive}"
     assert not (work / "runs/a/laydown/laydown.h5").exists()  # no product of a killed run
+    # a plain rerun does not discard the killed run's restart files: exit 2, nothing removed
+    kept = sorted(p.name for p in lw.iterdir())
+    plain = subprocess.run([*fiberform_cmd, "laydown", scene.name, "--build-dir", str(build_dir)], cwd=work,
+                           capture_output=True, text=True, errors="replace", timeout=300)
+    assert plain.returncode == 2 and "--resume` continues it" in plain.stderr, plain.stderr[-2000:]
+    assert sorted(p.name for p in lw.iterdir()) == kept
     res = subprocess.run([*fiberform_cmd, "laydown", scene.name, "--resume", "--build-dir",
                           str(build_dir)], cwd=work, capture_output=True, text=True,
                          errors="replace", timeout=900)

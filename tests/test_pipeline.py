@@ -233,3 +233,17 @@ def test_bad_run_commands_exit_2_and_write_nothing(tmp_path: Path, args: list[st
     assert r.returncode == 2, r.stdout + r.stderr
     assert words in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.yaml"]
+
+
+@pytest.mark.system
+def test_more_ranks_than_cores_exits_2_before_the_stage_writes_anything(tmp_path: Path) -> None:
+    """A stage whose MPI ranks exceed the cores is refused (exit status 2, naming the remedy)
+    before it creates its folder or removes products: the fabric before it finished, the flow
+    stage left nothing behind."""
+    cores = os.cpu_count() or 1
+    (tmp_path / "s.yaml").write_text(SCENE.replace("delta_p_Pa: 100.0}", f"delta_p_Pa: 100.0, ranks: {cores + 1}}}"))
+    r = _ff(tmp_path, "run", "s.yaml")
+    assert r.returncode == 2 and f"{cores + 1} MPI ranks requested" in r.stderr and "--oversubscribe" in r.stderr, \
+        r.stderr
+    assert (tmp_path / "runs/pipe/fabric/fabric.h5").is_file()
+    assert not (tmp_path / "runs/pipe/flow").exists()

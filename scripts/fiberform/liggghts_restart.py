@@ -24,14 +24,14 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from .errors import StageError
+from .errors import ConfigError, StageError
 from .liggghts_log import run_loop_times
 from .provenance import atomic_write_text
 
 __all__ = [
     "EARLIER_LOG", "EARLIER_WALL", "PREPARED_STEP", "RESTART_EXT", "RESUME_STATE", "cut_back",
     "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "record_earlier_wall", "record_prepared",
-    "read_text_if", "restart_interval_steps", "restart_name", "restart_steps", "resume_point", "run_log",
+    "read_text_if", "refuse_to_discard", "restart_interval_steps", "restart_name", "restart_steps", "resume_point", "run_log",
     "run_log_parts", "start_fresh",
 ]
 
@@ -104,6 +104,24 @@ def dump_steps(path: Path) -> list[int]:
 def start_fresh(work: Path, hashes: Mapping[str, str]) -> None:
     """Record the input hashes of a fresh run in its working folder (RESUME_STATE)."""
     atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
+
+
+def refuse_to_discard(work: Path, stem: str, hashes: Mapping[str, str], command: str) -> None:
+    """Before a run that would start over (neither ``--resume`` nor ``--force``): ConfigError (exit
+    status 2, nothing removed) when the working folder holds restart files of a killed run of the
+    same inputs (RESUME_STATE equals ``hashes``): a plain rerun must not delete hours of work.
+    Restart files of other inputs cannot be resumed and go as before. ``command``: how the stage
+    is called (``fiberform laydown SCENE``), for the message."""
+    steps = restart_steps(work, stem) if work.is_dir() else []
+    if not steps:
+        return
+    try:
+        old = json.loads((work / RESUME_STATE).read_text())
+    except (OSError, ValueError):
+        return
+    if old == dict(hashes):
+        raise ConfigError(f"{work} holds restart files to step {steps[-1]} of a killed run of these inputs: "
+                          f"`{command} --resume` continues it, `{command} --force` starts over and removes them")
 
 
 def record_prepared(work: Path, step: int | None) -> None:

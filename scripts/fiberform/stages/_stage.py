@@ -55,7 +55,7 @@ from ..provenance import (
     text_hash,
     write_provenance,
 )
-from ..runner import Program, run
+from ..runner import Program, build_command, run
 from ..scene import Scene, section_hash
 
 __all__ = ["STATE_NAME", "Outcome", "Program", "Stage", "StageContext", "resumes"]
@@ -170,6 +170,20 @@ class Stage(abc.ABC):
         """Check the environment (binaries present, ...) before anything is written; raise
         StageError or ConfigError. The base does nothing."""
 
+    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:  # noqa: B027
+        """A run that starts over (neither ``--resume`` nor ``--force``) may do so: a stage whose
+        killed runs leave restart files raises ConfigError when starting over would discard a
+        resumable one (fiberform.liggghts_restart.refuse_to_discard). The base does nothing."""
+
+    def check_launch(self, ctx: StageContext) -> None:
+        """A local run (:meth:`execute`): the stage's program lines can be launched here, their MPI
+        ranks against the machine's cores (ConfigError, exit status 2, unless ``--oversubscribe``),
+        checked before anything is written or removed (:func:`fiberform.runner.build_command`
+        checks the same when it runs). Not for batch jobs: their program lines run under the
+        scheduler's allocation, which may span nodes."""
+        for prog in self.programs(ctx):
+            build_command(list(prog.argv), prog.ranks, ctx.oversubscribe)
+
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         """Hashes of everything the products depend on: the scene entries in ``uses``, the code
         version, every upstream product of :meth:`needs` and every program of ``binaries``
@@ -242,6 +256,9 @@ class Stage(abc.ABC):
             return Outcome(self.name, True, self.product_paths(ctx), time.monotonic() - start,
                            "up to date")  # fmt: skip
         self.preflight(ctx)
+        self.check_launch(ctx)
+        if not ctx.force and not ctx.options.get("resume"):
+            self.check_start_over(ctx, hashes)
         started = self._begin(ctx, os.getpid())
         self._write_products(ctx, hashes, started, start,
                              lambda h5, tmp: self.produce(ctx, h5, tmp, hashes))
@@ -257,6 +274,8 @@ class Stage(abc.ABC):
         if not ctx.force and self.up_to_date(ctx, hashes):
             return False
         self.preflight(ctx)
+        if not ctx.force and not ctx.options.get("resume"):
+            self.check_start_over(ctx, hashes)
         started = self._begin(ctx, os.getppid())
         prepared = self.stage_dir(ctx) / PREPARED_NAME
         prepared.unlink(missing_ok=True)

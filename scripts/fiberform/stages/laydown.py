@@ -57,8 +57,8 @@ from .. import liggghts_restart
 from ..liggghts_log import dump_frame, read_dump, total_wall_time
 from ..liggghts_restart import (
     EARLIER_LOG, EARLIER_WALL, PREPARED_STEP, RESTART_EXT, RESUME_STATE, cut_back, dump_snapshots, dump_steps,
-    earlier_wall, prepared_step, read_text_if, record_earlier_wall, record_prepared, restart_interval_steps,
-    restart_name, run_log, run_log_parts, start_fresh,
+    earlier_wall, prepared_step, read_text_if, record_earlier_wall, record_prepared, refuse_to_discard,
+    restart_interval_steps, restart_name, run_log, run_log_parts, start_fresh,
 )
 from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
@@ -330,6 +330,9 @@ class Laydown(Stage):
                 raise StageError(f"{lib} missing: coupling.fluid_ranks = {cp.fluid_ranks} needs "
                                  "OpenFOAM's libPstream rebuilt with the MPMD split (make setup, or "
                                  "scripts/setup/openfoam-pstream.sh; $FIBERFORM_PSTREAM_DIR)")
+
+    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        refuse_to_discard(self.stage_dir(ctx) / "work", RESTART_STEM, hashes, f"fiberform laydown {ctx.scene_path}")
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
         """The working folder: fresh (fibers.data, fibers.nodes, flow.grid copied in) or, with

@@ -59,8 +59,8 @@ from ..inputs import (
 )
 from ..liggghts_log import log_up_to_step, read_dump, thermo_rows, total_wall_time
 from ..liggghts_restart import (
-    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, restart_interval_steps,
-    restart_name, restart_steps, resume_point, run_log, run_log_parts, start_fresh,
+    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, refuse_to_discard,
+    restart_interval_steps, restart_name, restart_steps, resume_point, run_log, run_log_parts, start_fresh,
 )
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
@@ -491,6 +491,9 @@ class Press(Stage):
         if not (ctx.build_dir / "bin" / "fiberdem").is_file():
             raise StageError(f"{ctx.build_dir / 'bin' / 'fiberdem'} not found: build first")
         plan(ctx.scene, ctx.scene.output_path)  # a target thickness above the sheet: exit 2 now
+
+    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        refuse_to_discard(self.stage_dir(ctx) / "work", RESTART_STEM, hashes, f"fiberform press {ctx.scene_path}")
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
         """The working folder: fresh (the lay-down's final restart file, the nodes of the fibers
