@@ -461,6 +461,11 @@ def test_runner_keep_adds_to_an_earlier_results_file(tmp_path: Path) -> None:
     proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     res = json.loads(out.read_text())
+    # the code of the call: the package's version and revisions, the campaign file's hash
+    from fiberform._versions import git_revision, package_version
+    from fiberform.provenance import file_hash
+    assert res["code"]["fiberform"] == package_version() and res["code"]["git_revision"] == git_revision()
+    assert res["code"]["campaign_sha256"] == file_hash(camp / "campaign.yaml") and res["code"]["build_revision"]
     assert [p["name"] for p in res["points"]] == ["A", "S2"]  # campaign order
     assert res["kept_from"]["groups"] == ["S2-circular"] and res["kept_from"]["command"] == "--points S2"
     assert res["variants"] == earlier["variants"]

@@ -76,7 +76,8 @@ import yaml
 from fiberform import campaign as cp
 from fiberform import campaign_report, executors
 from fiberform.errors import ConfigError, FiberformError
-from fiberform.provenance import atomic_write_text, machine_info
+from fiberform._versions import build_revision, git_revision, package_version
+from fiberform.provenance import atomic_write_text, file_hash, machine_info
 from fiberform.scene import load_scene
 
 HERE = Path(__file__).resolve().parent
@@ -379,6 +380,9 @@ def _main() -> int:
     cp.write_json(out, {
         "campaign": str(args.campaign),
         "command": " ".join(sys.argv[1:]), "machine": machine_info(), "seeds": seeds,
+        # the code of this call (each variant row has its products' git_revision / build_revision)
+        "code": {"fiberform": package_version(), "git_revision": git_revision(),
+                 "build_revision": build_revision(build), "campaign_sha256": file_hash(args.campaign)},
         "points": point_rows, "kept_from": kept_from,
         "pressure_press": current,
         # SEM convention: experimental mass = simulated mass x sem_factor (every point's sem_mass_kg)
