@@ -276,8 +276,8 @@ def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
         with pytest.raises(RuntimeError, match=msg):
             run_case(fiberdem_build, tmp_path / msg, case)
     # contact keywords: fiber pairs in newton mode without self-contact; the press plate's servo/stop
-    for cmds, msg in [(["pair_style fiber/dlvo implicit_force newton self_contact yes", "pair_coeff * *"],
-                       "self_contact"),
+    for cmds, msg in [(["newton on off", "pair_style fiber/dlvo implicit_force newton self yes", "pair_coeff * *"],
+                       "no self_contact .keyword self."),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 servo 1e-6 5e-3 0 1 0 1 "
                         "implicit_force newton"], "p_ref > 0"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 servo 1e-6 5e-3 1 2 1e-3 1 0 2 "

@@ -39,7 +39,7 @@ void FixFiberDlvoStep::init() {
     error->all(FLERR, "pair_style fiber/dlvo: implicit_force newton needs fix fiber/beam integrator implicit");
   if (newton_ && (cfg.self_contact || cfg.frozen_groupbit || cfg.section != fiberform::Section::Circle))
     error->all(FLERR, "pair_style fiber/dlvo: implicit_force newton supports circular sections (the larger "
-                      "half-axis of fix fiber/beam's section), no self_contact and no frozen group yet");
+                      "half-axis of fix fiber/beam's section), no self_contact (keyword self) and no frozen group yet");
   if (newton_ && !model_) {
     newton_law_ = cfg.law;
     newton_law_.steric.s1_damping = true;  // the PD servo, as the static bodies (docs/models/contact.md 8)

@@ -5,8 +5,10 @@
 
    The pair style owns the parameters, the neighbour list (a plain FULL list whose cut-off covers two
    element lengths, two radii and the force range) and, for integrator none, the instantaneous
-   forces. For integrator cvode/substep it creates the internal fix fiber/dlvo/step, which does the
-   sub-integration at the start of each fiber step (see fiber_contact_fix.h for why). */
+   forces. In every mode it creates the internal fix fiber/dlvo/step (ID FIBER_DLVO_STEP;
+   docs/styles/fix_fiber_dlvo_step.md), which does the sub-integration at the start of each fiber
+   step (cvode/substep; see fiber_contact_fix.h for why) or, with implicit_force newton, puts the
+   fiber-fiber contacts into the fibers' Newton solves. */
 #ifndef LMP_PAIR_FIBER_DLVO_H
 #define LMP_PAIR_FIBER_DLVO_H
 
