@@ -13,6 +13,7 @@ coarse 1 x 1 mm piece of the default fabric (50 um cells, about 15,000 fluid cel
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -249,6 +250,8 @@ def test_prepare_program_collect_equals_the_one_step_stage(stage_run: Path, tmp_
     assert not (d / "stage-state.json").exists() and not (d / "prepared.json").exists()
     assert ff("prepare", "flow", "s.yaml").returncode == 3  # up to date: the batch job ends here
     assert ff("prepare", "flow", "s.yaml", "--force").returncode == 0
+    # the product records the options the run was prepared with (collect has none of its own)
+    assert json.loads((d / "prepared.json").read_text())["options"]["force"] is True
     (tmp_path / "s.yaml").write_text(SCENE.replace("delta_p_Pa: 100.0", "delta_p_Pa: 50.0"))
     r = ff("collect", "flow", "s.yaml")
     assert r.returncode == 1 and "prepared from other inputs" in r.stderr, r.stderr

@@ -34,6 +34,7 @@ Stages without an external program (generate, fabric) have no program lines and 
 from __future__ import annotations
 
 import abc
+import dataclasses
 import datetime as _dt
 import json
 import os
@@ -284,7 +285,8 @@ class Stage(abc.ABC):
         except BaseException as exc:
             self._failed(ctx, started, exc)
             raise
-        atomic_write_text(prepared, json.dumps({"stage": self.name, "input_hashes": dict(hashes)}) + "\n")
+        atomic_write_text(prepared, json.dumps({"stage": self.name, "input_hashes": dict(hashes),
+                                                "options": dict(ctx.options)}) + "\n")
         return True
 
     def execute_collect(self, ctx: StageContext) -> Outcome:
@@ -304,6 +306,9 @@ class Stage(abc.ABC):
             raise StageError(f"{self.stage_dir(ctx)}: prepared from other inputs than the scene's now; "
                              f"prepare it again (`fiberform prepare {self.name} SCENE`)")
         started = _now()
+        # the products record the options the run was prepared with (--force, --resume, ...), not
+        # those of the collect command, which has none
+        ctx = dataclasses.replace(ctx, options=dict(rec.get("options", ctx.options)))
         self._write_products(ctx, hashes, started, start,
                              lambda h5, tmp: self.collect(ctx, h5, tmp, hashes, {}))
         prepared.unlink(missing_ok=True)
