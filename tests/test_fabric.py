@@ -229,3 +229,22 @@ def test_bad_weave_is_a_scene_error(tmp_path: Path) -> None:
     assert r.returncode == 2
     assert "cd_count_per_m" in r.stderr
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("fabric, words", [
+    ("{source: voxels, import_file: in/f.h5, shed: 4}", "fabric.shed (line 3) = 4: only used when source is generate"),
+    ("{source: stl, import_file: in/f.stl, md_diameter_m: 0.1e-3}", "fabric.md_diameter_m"),
+    ("{source: voxels, import_file: in/f.h5, voxel_size_m: 10.0e-6}", "only used when source is generate or stl"),
+    ("{source: generate, import_unit_m: 1.0e-3}", "fabric.import_unit_m"),
+    ("{source: stl, import_file: in/missing.stl}", "fabric.import_file: "),
+], ids=["weave field on voxels", "weave field on stl", "voxel size on voxels", "stl unit on a weave",
+        "missing import file"])
+def test_fields_the_source_does_not_use_and_missing_files_exit_2(tmp_path: Path, fabric: str, words: str) -> None:
+    """A fabric field the chosen source does not use configures nothing: refused, naming it; an
+    import file that does not exist is refused before anything is written."""
+    (tmp_path / "s.yaml").write_text(
+        "name: bad\nrun: {timestep_s: 1.0e-6, duration_s: 1.0e-3}\n" f"fabric: {fabric}\n")
+    r = _run_cli(["fabric", "s.yaml"], tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert words in r.stderr, r.stderr
+    assert not (tmp_path / "runs").exists()

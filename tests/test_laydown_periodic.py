@@ -137,7 +137,7 @@ BAD_PERIODIC = {
         ("contact: {model", "coupling: {mode: two_way}\ncontact: {model"),
         ("laydown.walls", "coupling.mode two_way", "symmetry sides")),
     "imported_fabric": (
-        ("fabric: {size_x_m", "fabric: {source: voxels, import_file: f.h5, size_x_m"),
+        (FABRIC, "fabric: {source: voxels, import_file: f.h5, size_x_m: 1.0e-3, size_y_m: 1.0e-3}\n"),
         ("fabric.source", "'voxels'", "generated fabric")),
     # shed 8 at 4000 columns per metre: repeats of 2 mm; 1 mm is half of one (the only size offered: 2 mm)
     "part_repeat_x": (

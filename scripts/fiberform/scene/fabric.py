@@ -94,4 +94,22 @@ class FabricSection(_Section):
             raise scene_problem(
                 "import_file", "only used when source is voxels or stl", self.import_file
             )
+        # a field the source does not use, given in the scene, configures nothing: refused
+        for name in sorted(self.model_fields_set):
+            sources = FABRIC_FIELD_SOURCES.get(name)
+            if sources is not None and self.source not in sources:
+                raise scene_problem(name, f"only used when source is {' or '.join(sources)} (this one: "
+                                    f"{self.source})", getattr(self, name))
         return self
+
+
+#: the fabric fields that act only with some sources (stage fabric, make_fabric): the weave's with a
+#: generated fabric; the image's voxel size when one is made (generate, stl); the unit of an STL
+WEAVE_FIELDS = ("md_diameter_m", "cd_top_diameter_m", "cd_bottom_diameter_m", "md_count_per_m",
+                "cd_count_per_m", "shed", "shed_step", "bottom_shift", "clearance_m", "arc_step_deg",
+                "stl_voxel_size_m")
+FABRIC_FIELD_SOURCES: dict[str, tuple[str, ...]] = {
+    **{name: ("generate",) for name in WEAVE_FIELDS},
+    "voxel_size_m": ("generate", "stl"),
+    "import_unit_m": ("stl",),
+}

@@ -25,7 +25,7 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import SceneError, StageError
+from ..errors import ConfigError, SceneError, StageError
 from ..fabric_geometry import (
     KIND_NAMES,
     FabricGeometryError,
@@ -352,6 +352,14 @@ class FabricStage(Stage):
                     "than 2e8"
                 )
         return problems
+
+    def preflight(self, ctx: StageContext) -> None:
+        """An imported fabric's file exists (relative to the working directory), before anything
+        is written: ConfigError (exit status 2) naming the field."""
+        sec = ctx.scene.fabric
+        if sec is not None and sec.import_file is not None and not (Path.cwd() / sec.import_file).is_file():
+            raise ConfigError(f"fabric.import_file: {Path.cwd() / sec.import_file} does not exist "
+                              "(the path is relative to the working directory)")
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
