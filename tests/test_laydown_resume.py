@@ -269,8 +269,9 @@ def test_a_resume_killed_before_its_first_snapshot_resumes_again(tmp_path: Path)
     19: the case-C run lost its 10 ms restart file this way and went back to 8 ms.)"""
     import json
 
-    from fiberform.stages.laydown import (EARLIER_LOG, LOG_NAME, PREPARED_STEP, RESUME_STATE, TRAJ_NAME,
-                                          nodes_left, prepare_resume, resume_point)
+    from fiberform.liggghts_restart import RESUME_STATE
+    from fiberform.stages.laydown import (EARLIER_LOG, LOG_NAME, PREPARED_STEP, TRAJ_NAME, nodes_left,
+                                          prepare_resume, resume_point)
 
     work = tmp_path / "work"
     work.mkdir()

@@ -124,6 +124,27 @@ def refuse_to_discard(work: Path, stem: str, hashes: Mapping[str, str], command:
                           f"`{command} --resume` continues it, `{command} --force` starts over and removes them")
 
 
+def start_over(work: Path, stem: str, hashes: Mapping[str, str], command: str, resume_asked: bool,
+               why_not: str = "no snapshot after it, no resume from it") -> None:
+    """A fresh working folder for a run from step 0 (RESUME_STATE records ``hashes``). Restart files
+    of an earlier run in it are removed, saying so on standard error: ``--resume`` was asked but
+    none of them is certainly complete and usable (``why_not``), or they belong to other inputs
+    (:func:`refuse_to_discard` has refused the case where they are of the same inputs and
+    ``--resume`` was not asked)."""
+    import shutil
+    import sys
+
+    earlier = restart_steps(work, stem) if work.is_dir() else []
+    if earlier:
+        why = f"none of them is certainly complete ({why_not})" if resume_asked else "they are of other inputs"
+        print(f"{command}: starting over: the restart files of an earlier run in {work} (steps "
+              f"{earlier[0]}-{earlier[-1]}) are removed; {why}", file=sys.stderr)
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    start_fresh(work, hashes)
+
+
 def record_prepared(work: Path, step: int | None) -> None:
     """PREPARED_STEP: the step the run starts from (None: a fresh run)."""
     atomic_write_text(work / PREPARED_STEP, json.dumps({"resume_step": step}) + "\n")
@@ -202,10 +223,7 @@ def record_earlier_wall(work: Path, step: int, log: str) -> None:
 def earlier_wall(work: Path) -> float | None:
     """The fiberdem time of the parts before this resumed run (EARLIER_WALL), 0 for a run from step
     0, ``None`` when unknown (:func:`record_earlier_wall`)."""
-    try:
-        resumed = json.loads((work / PREPARED_STEP).read_text())["resume_step"]
-    except (OSError, ValueError, KeyError):
-        return 0.0
+    resumed = prepared_step(work)
     if resumed is None:
         return 0.0
     path = work / EARLIER_WALL

@@ -56,6 +56,7 @@ from ..provenance import (
     text_hash,
     write_provenance,
 )
+from ..liggghts_log import total_wall_time
 from ..runner import Program, build_command, run
 from ..scene import Scene, section_hash
 
@@ -223,6 +224,12 @@ class Stage(abc.ABC):
         folder (``log.simpleFoam``)."""
         d, log = self.stage_dir(ctx).resolve(), log.resolve()
         return str(log.relative_to(d)) if log.is_relative_to(d) else str(log)
+
+    def liggghts_wall_time(self, ctx: StageContext, log: Path, wall_times: Mapping[str, float]) -> float:
+        """A LIGGGHTS program's wall time (s): as fiberform measured it (``wall_times``, a local
+        run), else the sum of the Loop times of its log (a batch job ran it)."""
+        key = self.log_key(ctx, log)
+        return wall_times[key] if key in wall_times else total_wall_time(log.read_text(errors="replace"))
 
     def collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], hashes: Mapping[str, str],
                 wall_times: Mapping[str, float]) -> None:

@@ -54,11 +54,11 @@ from ..fiber_sheet import (
 )
 from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_file_token
 from .. import liggghts_restart
-from ..liggghts_log import dump_frame, read_dump, total_wall_time
+from ..liggghts_log import dump_frame, read_dump
 from ..liggghts_restart import (
-    EARLIER_LOG, EARLIER_WALL, PREPARED_STEP, RESTART_EXT, RESUME_STATE, cut_back, dump_snapshots, dump_steps,
-    earlier_wall, prepared_step, read_text_if, record_earlier_wall, record_prepared, refuse_to_discard,
-    restart_interval_steps, restart_name, run_log, run_log_parts, start_fresh,
+    EARLIER_LOG, EARLIER_WALL, PREPARED_STEP, RESTART_EXT, cut_back, dump_snapshots, earlier_wall,
+    prepared_step, read_text_if, record_prepared, refuse_to_discard, restart_interval_steps, restart_name,
+    run_log, run_log_parts, start_over,
 )
 from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
 from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
@@ -345,21 +345,10 @@ class Laydown(Stage):
                   else (lambda step: True))  # fmt: skip
         resume_step = resume_point(work, hashes, usable) if ctx.options.get("resume") else None
         if resume_step is None:
-            earlier = restart_steps(work) if work.is_dir() else []
-            if earlier:
-                import sys
-
-                why = ("none of them is certainly complete (no snapshot after it, no resume from it)"
-                       if ctx.options.get("resume") else "`--resume` continues from them")
-                print(f"fiberform laydown: starting over: the restart files of an earlier run in {work} "
-                      f"(steps {earlier[0]}-{earlier[-1]}) are removed; {why}", file=sys.stderr)
-            if work.exists():
-                shutil.rmtree(work)
-            work.mkdir(parents=True)
+            start_over(work, RESTART_STEM, hashes, "fiberform laydown", bool(ctx.options.get("resume")))
             for key, name in (("fibers_data", "fibers.data"), ("fibers_nodes", "fibers.nodes"),
                               ("flow_grid", "flow.grid")):
                 shutil.copyfile(paths[key], work / name)
-            start_fresh(work, hashes)
         else:
             prepare_resume(work, resume_step, paths["fibers_nodes"])
             nodes_left(work, paths["fibers_nodes"])
@@ -419,8 +408,7 @@ class Laydown(Stage):
         steps_per_check, checks = run_lengths(scene)
         u_s = self._superficial_velocity(ctx)
         v_settle = settle_speed(scene, u_s)
-        key = self.log_key(ctx, work / LOG_NAME)
-        wall_part = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
+        wall_part = self.liggghts_wall_time(ctx, work / LOG_NAME, wall_times)
         # a resumed run: the parts before it, to the restart step it continued from, count too
         wall_before = earlier_wall(work)
         wall = wall_part + (wall_before or 0.0)

@@ -29,7 +29,7 @@ import numpy.typing as npt
 
 from ..errors import ConfigError, StageError
 from ..inputs import STAR, LiggghtsInput, dump_format, file_token
-from ..liggghts_log import Frame, read_dump, total_wall_time
+from ..liggghts_log import Frame, read_dump
 from ..provenance import text_hash, write_dataset
 from ..runner import Program, build_command, liggghts_progress
 from ..scene import DemoParticlesSection, RunSection, Scene
@@ -265,8 +265,7 @@ class DemoParticles(Stage):
         assert d is not None
         work = self.stage_dir(ctx)
         prog = self.programs(ctx)[0]
-        key = self.log_key(ctx, prog.log)
-        elapsed = wall_times[key] if key in wall_times else total_wall_time(prog.log.read_text(errors="replace"))
+        elapsed = self.liggghts_wall_time(ctx, prog.log, wall_times)
         try:  # the command line as fiberform starts it (a batch job may have used a larger node)
             cmd = build_command(list(prog.argv), prog.ranks, ctx.oversubscribe)
         except ConfigError:

@@ -57,10 +57,10 @@ from ..inputs import (
     LiggghtsInput, Token, file_token, fix_affine, fix_ref, fix_sum, ident_list, jump_if_at_least,
     print_values, step_file_token, var_affine, var_distance, var_ref, var_value,
 )
-from ..liggghts_log import log_up_to_step, read_dump, thermo_rows, total_wall_time
+from ..liggghts_log import log_up_to_step, read_dump, thermo_rows
 from ..liggghts_restart import (
     EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, refuse_to_discard,
-    restart_interval_steps, restart_name, restart_steps, resume_point, run_log, run_log_parts, start_fresh,
+    restart_interval_steps, restart_name, restart_steps, resume_point, run_log, run_log_parts, start_over,
 )
 from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
@@ -518,23 +518,12 @@ class Press(Stage):
                 cut_back(work, resume_step, RESTART_STEM, TRAJ_NAME, LOG_NAME, log_text=current)
                 atomic_write_text(work / EARLIER_LOG, log_up_to_step(log, resume_step))
         if resume_step is None:
-            earlier_steps = restart_steps(work, RESTART_STEM) if work.is_dir() else []
-            if earlier_steps:
-                import sys
-
-                why = ("none of them is certainly complete and usable (no snapshot after it; pressure "
-                       "mode: before the servo took over)" if ctx.options.get("resume")
-                       else "`--resume` continues from them")
-                print(f"fiberform press: starting over: the restart files of an earlier run in {work} "
-                      f"(steps {earlier_steps[0]}-{earlier_steps[-1]}) are removed; {why}", file=sys.stderr)
-            if work.exists():
-                shutil.rmtree(work)
-            work.mkdir(parents=True)
+            start_over(work, RESTART_STEM, hashes, "fiberform press", bool(ctx.options.get("resume")),
+                       "no snapshot after it; pressure mode: before the servo took over")
             shutil.copyfile(up["laydown_restart"], work / START_NAME)
             # the fibers left on the sheet (the lay-down may have removed some)
             write_nodes_subset(up["fibers_nodes"], work / NODES_NAME,
                                read_sheet(up["laydown_h5"]).fiber_id.tolist())
-            start_fresh(work, hashes)
         write_yarns(work / YARNS_NAME, up["fabric_h5"], lateral_period(scene))
         (work / INPUT_NAME).write_text(build_input(scene, p, resume_step))
         record_prepared(work, resume_step)
@@ -571,8 +560,7 @@ class Press(Stage):
         p = plan(scene, scene.output_path)
         work = self.stage_dir(ctx) / "work"
         yarns = read_yarns(self.needs(ctx)["fabric_h5"])
-        key = self.log_key(ctx, work / LOG_NAME)
-        wall = wall_times[key] if key in wall_times else total_wall_time((work / LOG_NAME).read_text(errors="replace"))
+        wall = self.liggghts_wall_time(ctx, work / LOG_NAME, wall_times)
         # a resumed press: the parts before it, up to the restart step it continued from
         # (EARLIER_LOG: their log text; their fiberdem time)
         wall += earlier_wall(work) or 0.0
