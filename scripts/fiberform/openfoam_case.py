@@ -918,3 +918,76 @@ def read_patch_history(case: Path, name: str) -> tuple[FloatArray, FloatArray]:
                 continue
     ts = sorted(history)
     return np.array(ts, dtype=np.float64), np.array([history[t] for t in ts], dtype=np.float64)
+
+
+def cell_centres(case: Path, description: str = "writeCellCentres") -> npt.NDArray[np.float64]:
+    """The cell centres of the mesh at time 0 (m, (cells, 3)): ``postProcess -func
+    writeCellCentres`` (log ``log.writeCellCentres`` in the case), read, and the written fields
+    removed again."""
+    from foamlib import FoamFieldFile
+
+    run(["postProcess", "-func", "writeCellCentres", "-time", "0"], Path("log.writeCellCentres"), cwd=case,
+        description=description)
+    C = np.asarray(FoamFieldFile(case / "0" / "C").internal_field, dtype=np.float64).reshape(-1, 3)
+    for name in ("C", "Cx", "Cy", "Cz"):
+        (case / "0" / name).unlink(missing_ok=True)
+    return C
+
+
+def decompose(case: Path, ranks: int) -> None:
+    """Decompose the case for ``ranks`` ranks: slabs across x (method simple; Debian's OpenFOAM has
+    no scotch), ``decomposePar -force``; earlier processor folders go first."""
+    from foamlib import FoamFile
+
+    for stale in case.glob("processor*"):
+        shutil.rmtree(stale)
+    if ranks <= 1:
+        return
+    with FoamFile(case / "system" / "decomposeParDict") as d:
+        d["numberOfSubdomains"] = int(ranks)
+        d["method"] = "simple"
+        d["coeffs"]["n"] = [int(ranks), 1, 1]
+    run(["decomposePar", "-force"], Path("log.decomposePar"), cwd=case, description="decomposePar")
+
+
+def coupled_roots(case: Path) -> list[Path]:
+    """Where a coupled fluid writes its time folders: the case, or its processor* folders when it
+    ran on several ranks (decomposed)."""
+    procs = sorted(case.glob("processor*"))
+    return procs if procs else [case]
+
+
+def coupled_state(case: Path, time_s: float, tolerance_s: float) -> list[Path] | None:
+    """A coupled fluid's time folders of ``time_s`` (within ``tolerance_s``; one per fluid rank),
+    if every rank wrote its state (U and phi)."""
+    if not case.is_dir():
+        return None
+    states = []
+    for root in coupled_roots(case):
+        found = [d for d in root.iterdir() if d.is_dir() and is_time_name(d.name)
+                 and abs(float(d.name) - time_s) <= tolerance_s]
+        if not found or not ((found[0] / "U").is_file() and (found[0] / "phi").is_file()):
+            return None
+        states.append(found[0])
+    return states
+
+
+def cut_coupled_back(case: Path, states: list[Path]) -> None:
+    """Cut a coupled fluid back to its state ``states`` (:func:`coupled_state`): later time folders
+    and function-object records go, the fibers' source of that state is dropped (it is recomputed
+    from the first reaction; a fiberSource file would be read as a background force), and the
+    fluid starts from the latest time left."""
+    from foamlib import FoamFile
+
+    t = float(states[0].name)
+    roots = coupled_roots(case)
+    for d in [d for root in roots for d in root.iterdir()] + list((case / "postProcessing").glob("*/*")):
+        if not is_time_name(d.name):
+            continue
+        later = float(d.name) > t if d.parent in roots else float(d.name) >= t
+        if d.is_dir() and later:
+            shutil.rmtree(d)
+    for state in states:
+        (state / "fiberSource").unlink(missing_ok=True)
+    with FoamFile(case / "system" / "controlDict") as c:
+        c["startFrom"] = "latestTime"

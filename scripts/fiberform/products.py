@@ -23,6 +23,9 @@ __all__ = [
     "FIBERS_NODES",
     "FLOW_GRID",
     "FLOW_H5",
+    "FlowGrid",
+    "read_flow_grid",
+    "read_superficial_velocity",
     "LAYDOWN_H5",
     "LAYDOWN_RESTART",
     "PRESS_H5",
@@ -178,6 +181,33 @@ def read_yarns(fabric_h5: Path) -> Yarns:
         return Yarns(np.asarray(f["yarns/points"][...], dtype=np.float64),
                      np.asarray(f["yarns/offsets"][...], dtype=np.int64),
                      np.asarray(f["yarns/radius"][...], dtype=np.float64))
+
+
+def read_superficial_velocity(flow_h5: Path) -> float:
+    """The bare fabric's superficial velocity of the flow stage's ``flow.h5`` (m/s)."""
+    with h5py.File(flow_h5, "r") as f:
+        return float(f["flow_rate/superficial_velocity"][()])
+
+
+@dataclass(frozen=True)
+class FlowGrid:
+    """The uniform grid of a ``flow.h5`` (the flow stage's velocity samples; the two-way
+    coupling's exchange grid) and the lattice of its OpenFOAM mesh."""
+
+    origin: FloatArray  #: (3,) [m]
+    spacing: FloatArray  #: (3,) [m]
+    shape: tuple[int, int, int]  #: cells along x, y, z
+    lattice: tuple[FloatArray, FloatArray, FloatArray]  #: the mesh lattice's coordinates along x, y, z [m]
+
+
+def read_flow_grid(flow_h5: Path) -> FlowGrid:
+    """The grid and mesh lattice of a ``flow.h5``."""
+    with h5py.File(flow_h5, "r") as f:
+        lattice = tuple(np.asarray(f[f"lattice/{a}"][...], dtype=np.float64) for a in "xyz")
+        return FlowGrid(np.asarray(f["grid/origin"][...], dtype=np.float64),
+                        np.asarray(f["grid/spacing"][...], dtype=np.float64),
+                        tuple(int(n) for n in f["grid/shape"][...]),  # type: ignore[arg-type]
+                        lattice)  # type: ignore[arg-type]
 
 
 def read_fiber_outer_axes(fibers_h5: Path, fiber_ids: npt.NDArray[np.int64]) -> FloatArray:

@@ -60,11 +60,17 @@ from ..liggghts_restart import (
     prepared_step, read_text_if, record_prepared, refuse_to_discard, restart_interval_steps, restart_name,
     run_log, run_log_parts, start_over,
 )
-from ..openfoam_case import CASE_DIR, DRAINAGE_FO, is_time_name, prepare_coupled_case, read_patch_history
-from ..products import FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_yarns
+from ..openfoam_case import (
+    CASE_DIR, DRAINAGE_FO, cell_centres, coupled_state, cut_coupled_back, decompose, prepare_coupled_case,
+    read_patch_history,
+)
+from ..products import (
+    FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_flow_grid,
+    read_superficial_velocity, read_yarns,
+)
 from ..provenance import atomic_write_text, file_hash, write_dataset
 from .._versions import pstream_dir
-from ..runner import liggghts_progress, mpmd_command, run
+from ..runner import liggghts_progress, mpmd_command
 from ..scene import FluidSection, Scene
 from ._stage import Outcome, Program, Stage, StageContext
 
@@ -375,8 +381,7 @@ class Laydown(Stage):
         return earlier_wall(self.stage_dir(ctx) / "work") or 0.0
 
     def _superficial_velocity(self, ctx: StageContext) -> float:
-        with h5py.File(ctx.scene.output_path / FLOW_H5, "r") as fh:
-            return float(fh["flow_rate/superficial_velocity"][()])
+        return read_superficial_velocity(ctx.scene.output_path / FLOW_H5)
 
     def programs(self, ctx: StageContext) -> list[Program]:
         argv, ranks = launch(ctx.scene, ctx.build_dir)
@@ -635,43 +640,21 @@ class Laydown(Stage):
 def prepare_fluid(scene: Scene, work: Path) -> None:
     """The coupled fluid's case in ``work/fluid``: the flow stage's case with its steady solution
     as time 0, transient controls, and the exchange map onto flow.grid's grid
-    (fiberform.coupling_map)."""
-    from foamlib import FoamFieldFile, FoamFile
-
+    (fiberform.coupling_map); decomposed for ``coupling.fluid_ranks`` > 1 (the map keeps the
+    undecomposed mesh's cell numbers; fiberPimpleFoam maps them to each rank's cells through
+    cellProcAddressing)."""
     ld, cp = scene.laydown, scene.coupling
     assert ld is not None and cp is not None
     flow_case = scene.output_path / "flow" / CASE_DIR
     # the fluid writes its state (binary, exact) at every restart file of the fibers
     case = prepare_coupled_case(flow_case, work / FLUID_CASE, cp.interval * ld.timestep_s,
                                 restart_every(scene) // cp.interval)
-    run(["postProcess", "-func", "writeCellCentres", "-time", "0"], Path("log.writeCellCentres"),
-        cwd=case, description="writeCellCentres")
-    C = np.asarray(FoamFieldFile(case / "0" / "C").internal_field, dtype=np.float64).reshape(-1, 3)
-    for name in ("C", "Cx", "Cy", "Cz"):
-        (case / "0" / name).unlink(missing_ok=True)
-    with h5py.File(scene.output_path / FLOW_H5, "r") as fh:
-        lattice = tuple(np.asarray(fh[f"lattice/{a}"][...], dtype=np.float64) for a in "xyz")
-        grid = ExchangeGrid(fh["grid/origin"][...], fh["grid/spacing"][...],
-                            tuple(int(n) for n in fh["grid/shape"][...]))
-    cells, weights, target = exchange_map(grid, lattice, C)  # type: ignore[arg-type]
+    C = cell_centres(case)
+    fg = read_flow_grid(scene.output_path / FLOW_H5)
+    grid = ExchangeGrid(fg.origin, fg.spacing, fg.shape)
+    cells, weights, target = exchange_map(grid, fg.lattice, C)  # type: ignore[arg-type]
     write_exchange_map(case / "constant" / MAP_NAME, grid, len(C), cells, weights, target)
-    for stale in case.glob("processor*"):
-        shutil.rmtree(stale)
-    if cp.fluid_ranks > 1:  # the map keeps the undecomposed mesh's cell numbers (fiberPimpleFoam
-        # maps them to each rank's cells through cellProcAddressing)
-        # slabs across x, as the flow stage decomposes (Debian's OpenFOAM has no scotch)
-        with FoamFile(case / "system" / "decomposeParDict") as d:
-            d["numberOfSubdomains"] = int(cp.fluid_ranks)
-            d["method"] = "simple"
-            d["coeffs"]["n"] = [int(cp.fluid_ranks), 1, 1]
-        run(["decomposePar", "-force"], Path("log.decomposePar"), cwd=case, description="decomposePar")
-
-
-def fluid_roots(case: Path) -> list[Path]:
-    """Where the coupled fluid writes its time folders: the case, or its processor* folders when
-    it ran on several ranks (decomposed)."""
-    procs = sorted(case.glob("processor*"))
-    return procs if procs else [case]
+    decompose(case, cp.fluid_ranks)
 
 
 def fluid_state(work: Path, scene: Scene, step: int) -> list[Path] | None:
@@ -679,42 +662,14 @@ def fluid_state(work: Path, scene: Scene, step: int) -> list[Path] | None:
     fluid rank), if every rank wrote its state."""
     ld, cp = scene.laydown, scene.coupling
     assert ld is not None and cp is not None
-    t = step * ld.timestep_s
-    case = work / FLUID_CASE
-    if not case.is_dir():
-        return None
-    states = []
-    for root in fluid_roots(case):
-        found = [d for d in root.iterdir() if d.is_dir() and is_time_name(d.name)
-                 and abs(float(d.name) - t) <= 1e-6 * cp.interval * ld.timestep_s]
-        if not found or not ((found[0] / "U").is_file() and (found[0] / "phi").is_file()):
-            return None
-        states.append(found[0])
-    return states
+    return coupled_state(work / FLUID_CASE, step * ld.timestep_s, 1e-6 * cp.interval * ld.timestep_s)
 
 
 def resume_fluid(work: Path, scene: Scene, step: int) -> None:
-    """Cut the coupled fluid back to its state at fiber step ``step``: later time folders and
-    drainage records go, the fibers' source of that state is dropped (it is recomputed from the
-    first reaction; a fiberSource file would be read as a background force), and the fluid starts
-    from the latest time left."""
-    from foamlib import FoamFile
-
+    """Cut the coupled fluid back to its state at fiber step ``step`` (openfoam_case.cut_coupled_back)."""
     states = fluid_state(work, scene, step)
     assert states is not None
-    t = float(states[0].name)
-    case = work / FLUID_CASE
-    roots = fluid_roots(case)
-    for d in [d for root in roots for d in root.iterdir()] + list((case / "postProcessing").glob("*/*")):
-        if not is_time_name(d.name):
-            continue
-        later = float(d.name) > t if d.parent in roots else float(d.name) >= t
-        if d.is_dir() and later:
-            shutil.rmtree(d)
-    for state in states:
-        (state / "fiberSource").unlink(missing_ok=True)
-    with FoamFile(case / "system" / "controlDict") as c:
-        c["startFrom"] = "latestTime"
+    cut_coupled_back(work / FLUID_CASE, states)
 
 
 def restart_steps(work: Path) -> list[int]:
