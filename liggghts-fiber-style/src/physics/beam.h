@@ -43,7 +43,7 @@
 
 namespace fiberform::physics::beam {
 
-constexpr double kPi = 3.14159265358979323846;
+using physics::kPi;
 
 // ------------------------------------------------------------------------------------------
 // small vector / quaternion algebra

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 
+#include "dlvo.h"
 #include "vec3.h"
 
 namespace fiberform::physics {
@@ -136,14 +137,14 @@ inline NodeLoads transfer_to_nodes(double s, Vec3 F, Vec3 r_off) {
 // van der Waals interaction (Israelachvili, Intermolecular and Surface Forces, table 13.1):
 //   F/L = -A / (8 sqrt(2) h^(5/2)) * sqrt(R1 R2 / (R1 + R2)).
 inline double parallel_cylinders_vdw_per_length(double A, double R1, double R2, double h) {
-  return -A / (8.0 * std::sqrt(2.0) * std::pow(h, 2.5)) * std::sqrt(R1 * R2 / (R1 + R2));
+  return -A / (8.0 * std::sqrt(2.0) * std::pow(h, 2.5)) * std::sqrt(reduced_radius(R1, R2));
 }
 
 // Number of contact points per element length Le such that point-pair van der Waals forces
 // (eq. 2.25, spacing Le/n) sum to the parallel-cylinder result at the matching gap h_match:
 //   A R/(6 h^2) / spacing = A sqrt(R)/(8 sqrt2 h^2.5)  =>  spacing = (4 sqrt2 / 3) sqrt(R h).
 inline int points_per_element(double Le, double R1, double R2, double h_match) {
-  const double R = R1 * R2 / (R1 + R2);
+  const double R = reduced_radius(R1, R2);
   const double spacing = 4.0 * std::sqrt(2.0) / 3.0 * std::sqrt(R * h_match);
   int n = static_cast<int>(std::lround(Le / spacing));
   return n < 1 ? 1 : n;

@@ -16,6 +16,8 @@
 #include <cmath>
 #include <limits>
 
+#include "vec3.h"
+
 namespace fiberform::physics {
 
 namespace constants {
@@ -23,7 +25,7 @@ inline constexpr double e = 1.602176634e-19;      // elementary charge, C
 inline constexpr double kB = 1.380649e-23;        // Boltzmann constant, J/K
 inline constexpr double NA = 6.02214076e23;       // Avogadro constant, 1/mol
 inline constexpr double eps0 = 8.8541878128e-12;  // vacuum permittivity, F/m
-inline constexpr double pi = 3.14159265358979323846;
+inline constexpr double pi = kPi;
 }  // namespace constants
 
 // r1*r2/(r1+r2), with r2 = +inf giving r1 (sphere-plane).

@@ -8,6 +8,8 @@
 
 namespace fiberform::physics {
 
+inline constexpr double kPi = 3.14159265358979323846;  // the one pi of the physics headers
+
 struct Vec3 {
   double x = 0, y = 0, z = 0;
   double &operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
