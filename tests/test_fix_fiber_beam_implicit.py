@@ -278,6 +278,9 @@ def test_bad_keywords_are_errors(fiberdem_build: Path, tmp_path: Path) -> None:
     # contact keywords: fiber pairs in newton mode without self-contact; the press plate's servo/stop
     for cmds, msg in [(["newton on off", "pair_style fiber/dlvo implicit_force newton self yes", "pair_coeff * *"],
                        "no self_contact .keyword self."),
+                      # the fiber pairs' candidate margin needs the drag in the node forces
+                      (["newton on off", "pair_style fiber/dlvo implicit_force newton", "pair_coeff * *",
+                        "fix drag all fiber/drag flow uniform 0 0 0"], "define fix fiber/drag before pair_style"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 servo 1e-6 5e-3 0 1 0 1 "
                         "implicit_force newton"], "p_ref > 0"),
                       (["fix w all wall/fiber/dlvo plane 0 0 -2e-5 0 0 1 servo 1e-6 5e-3 1 2 1e-3 1 0 2 "

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 
 #include "atom.h"
@@ -11,6 +12,7 @@
 #include "error.h"
 #include "fix_fiber_beam.h"
 #include "force.h"
+#include "modify.h"
 #include "pair_fiber_dlvo.h"
 #include "update.h"
 
@@ -40,6 +42,15 @@ void FixFiberDlvoStep::init() {
   if (newton_ && (cfg.self_contact || cfg.frozen_groupbit || cfg.section != fiberform::Section::Circle))
     error->all(FLERR, "pair_style fiber/dlvo: implicit_force newton supports circular sections (the larger "
                       "half-axis of fix fiber/beam's section), no self_contact (keyword self) and no frozen group yet");
+  // newton: the candidate margin of the fiber pairs takes every node's force per mass from f at
+  // post_force, so the drag and gravity of fix fiber/drag must be in it: that fix comes first
+  bool after = false;
+  for (int k = 0; k < modify->nfix && newton_; ++k) {
+    if (modify->fix[k] == this) after = true;
+    else if (after && !std::strcmp(modify->fix[k]->style, "fiber/drag"))
+      error->all(FLERR, "pair_style fiber/dlvo implicit_force newton: define fix fiber/drag before pair_style "
+                        "fiber/dlvo (the fiber pairs' candidate margin needs the drag in the node forces)");
+  }
   if (newton_ && !model_) {
     newton_law_ = cfg.law;
     newton_law_.steric.s1_damping = true;  // the PD servo, as the static bodies (docs/models/contact.md 8)
