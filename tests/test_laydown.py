@@ -54,6 +54,10 @@ def test_mass_accounting_is_exact(laydown_run: Path) -> None:
         assert a["sheet_node_mass"][()] == pytest.approx(masses[on_sheet].sum(), rel=1e-9)
     report = (laydown_run / "laydown" / "report.md").read_text()
     assert "mass accounting" in report
+    # the report states its origin: scene, seed, code (as the product's provenance records them)
+    with h5py.File(laydown_run / "laydown" / "laydown.h5", "r") as h:
+        seed, rev = int(h.attrs["seed"]), str(h.attrs["git_revision"])
+    assert f", seed {seed}, by fiberform " in report and f"Python at {rev}, binaries of build " in report
     for name in ("sheet.vtu", "laydown.png"):
         assert (laydown_run / "laydown" / name).stat().st_size > 0
 

@@ -137,6 +137,22 @@ def write_provenance(
     f.attrs["options"] = json.dumps(dict(options or {}), sort_keys=True)
 
 
+def report_origin(h5: h5py.File) -> str:
+    """The line a stage's ``report.md`` states its origin with, from the provenance already on
+    the root of the stage's HDF5 product (:func:`write_provenance`): scene, seed, the Python
+    package's version and revision and the binaries' build revision."""
+    a = h5.attrs
+
+    def text(key: str) -> str:
+        v = a.get(key, "unknown")
+        return v.decode() if isinstance(v, bytes) else str(v)
+
+    name = json.loads(text("scene_json")).get("name", "?") if "scene_json" in a else "?"
+    return (f"Made from scene `{name}`, seed {text('seed')}, by fiberform {text('fiberform')} (Python at "
+            f"{text('git_revision')}, binaries of build {text('build_revision')}); the HDF5 product's root "
+            "attributes hold the whole scene, its input hashes and the options.")
+
+
 def read_provenance(path: Path) -> dict[str, Any]:
     """The root attributes of a stage file, JSON attributes decoded. Raises OSError if the
     file cannot be read as HDF5."""

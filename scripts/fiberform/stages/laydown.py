@@ -68,7 +68,7 @@ from ..products import (
     FABRIC_H5, FIBERS_DATA, FIBERS_H5, FIBERS_NODES, FLOW_GRID, FLOW_H5, read_flow_grid,
     read_superficial_velocity, read_yarns,
 )
-from ..provenance import atomic_write_text, file_hash, write_dataset
+from ..provenance import atomic_write_text, file_hash, report_origin, write_dataset
 from .._versions import pstream_dir
 from ..runner import liggghts_progress, mpmd_command
 from ..scene import FluidSection, Scene
@@ -585,7 +585,7 @@ class Laydown(Stage):
                    f"{scene.name}: {len(present)} fibers on the fabric after "
                    f"{steps_done * ld.timestep_s * 1e3:.2f} ms", (dom.lo_m, dom.hi_m), period=period)
         lines = [
-            f"# Lay-down: scene `{scene.name}`", "",
+            f"# Lay-down: scene `{scene.name}`", "", report_origin(h5), "",
             f"- fibers injected: {n_fib} ({m_inj:.6g} kg); initial heights "
             f"{x0[:, 2].min() * 1e3:.3f}-{x0[:, 2].max() * 1e3:.3f} mm",
             f"- on the sheet: {len(present)} ({m_sheet:.6g} kg); removed below "

@@ -67,7 +67,7 @@ from ..products import (
     read_yarn_chains,
 )  # fmt: skip
 from ..fiber_sheet import lateral_period, periodic_images
-from ..provenance import file_hash, write_dataset
+from ..provenance import file_hash, report_origin, write_dataset
 from ..scene import PermeabilitySection, Scene
 from ._stage import Program, Stage, StageContext, resumes
 
@@ -455,6 +455,7 @@ class PermeabilityStage(Stage):
                  f"{s.delta_p_Pa:g} Pa")  # fmt: skip
         write_png(tmp[PNG_NAME], s, res, title)
         lines = report_lines(ctx.scene.name, perm, geo, s, res, conv, summary, wall)
+        lines[2:2] = [report_origin(h5), ""]
         if fh is not None:
             lines[-2:-2] = forchheimer_lines(fh)
         tmp[REPORT_NAME].write_text("\n".join(lines) + "\n")

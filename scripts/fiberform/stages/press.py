@@ -66,7 +66,7 @@ from ..products import (
     FABRIC_H5, FIBERS_H5, FIBERS_NODES, LAYDOWN_H5, LAYDOWN_RESTART, Yarns, read_fiber_outer_axes,
     read_sheet, read_yarns,
 )
-from ..provenance import atomic_write_text, file_hash, text_hash, write_dataset
+from ..provenance import atomic_write_text, file_hash, report_origin, text_hash, write_dataset
 from ..runner import liggghts_progress
 from ..scene import FluidSection, PressSection, Scene
 from ._stage import Program, Stage, StageContext
@@ -764,7 +764,7 @@ class Press(Stage):
             if isinstance(value, float):
                 rg.attrs[key] = value
         lines = [
-            f"# Press: scene `{scene.name}`", "",
+            f"# Press: scene `{scene.name}`", "", report_origin(h5), "",
             f"- mode {pr.mode}; plate area {p.area * 1e6:.4g} mm^2 (domain cross-section); plate "
             f"start {p.z0 * 1e3:.4f} mm ({pr.plate_start_gap_m * 1e6:.3g} um above the sheet); "
             f"fabric top {p.fabric_top * 1e3:.4f} mm",
