@@ -233,6 +233,13 @@ def test_pbs_submission_through_stand_in_qsub(tmp_path: Path, monkeypatch: pytes
     assert _ff(tmp_path, monkeypatch, "status", "s.yaml") == 0
     out = capsys.readouterr().out
     assert "fabric  missing  (pbs 1.pbs-test, COMPLETED)" in out and "flow    queued   (pbs 2.pbs-test, HELD)" in out, out
+    # a record whose job ID no scheduler prints (edited, or a string meant for a shell) is refused
+    # before it reaches a scheduler command: exit 2, naming the file
+    good = (jobs / "jobs.json").read_text()
+    (jobs / "jobs.json").write_text(good.replace('"2.pbs-test"', '"2; rm -rf ~"', 1))
+    assert _ff(tmp_path, monkeypatch, "status", "s.yaml") == 2
+    assert "jobs.json: job record of stage 'flow'" in capsys.readouterr().err
+    (jobs / "jobs.json").write_text(good)
 
     # qsub fails for the second job: exit 1, the first job stays recorded
     shutil.rmtree(jobs)

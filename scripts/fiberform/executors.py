@@ -85,6 +85,8 @@ _TIME = re.compile(r"(?:(?P<d>\d{1,3})-)?(?P<h>\d{1,3}):(?P<m>[0-5]\d):(?P<s>[0-
 _DIRECTIVE_PATH = re.compile(r"[A-Za-z0-9_./+@,=:-]+")
 #: A job ID as sbatch / qsub print it (Slurm: digits; PBS: ``123.server``).
 _JOB_ID = {"slurm": re.compile(r"\d+"), "pbs": re.compile(r"\d+(?:\[\d*\])?(?:\.[A-Za-z0-9_.-]+)?")}
+#: the IDs a job record may hold: a job's, or an array task's (Slurm ``<array>_<k>``, PBS ``<n>[<k>]...``)
+_RECORD_ID = {"slurm": re.compile(r"\d+(?:_\d+)?"), "pbs": _JOB_ID["pbs"]}
 _MAX_INT = 100_000
 
 
@@ -365,11 +367,20 @@ def read_records(output_path: Path) -> dict[str, JobRecord]:
         return {}
     try:
         data = json.loads(path.read_text())
-        return {stage: JobRecord(stage, str(r["scheduler"]), str(r["job_id"]), str(r["script"]),
-                                 str(r["submitted_utc"]), tuple(str(a) for a in r.get("after", ())))
-                for stage, r in data["jobs"].items()}
+        records = {stage: JobRecord(stage, str(r["scheduler"]), str(r["job_id"]), str(r["script"]),
+                                    str(r["submitted_utc"]), tuple(str(a) for a in r.get("after", ())))
+                   for stage, r in data["jobs"].items()}
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ConfigError(f"{path}: unreadable job records ({exc}); delete it to forget the jobs") from None
+    # the IDs go into scheduler commands and scripts again (status, resubmission): only what the
+    # scheduler could have printed is accepted, as at submission
+    for r in records.values():
+        pattern = _RECORD_ID.get(r.scheduler)
+        if pattern is None or not all(pattern.fullmatch(j) for j in (r.job_id, *r.after)):
+            raise ConfigError(f"{path}: job record of stage {r.stage!r} holds a scheduler or job ID that "
+                              f"{r.scheduler} would not print ({r.scheduler!r}, {r.job_id!r}, {list(r.after)!r}); "
+                              "delete the file to forget the jobs")
+    return records
 
 
 def _write_records(output_path: Path, records: Mapping[str, JobRecord]) -> None:
