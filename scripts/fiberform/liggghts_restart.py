@@ -30,9 +30,9 @@ from .provenance import atomic_write_text
 
 __all__ = [
     "EARLIER_LOG", "EARLIER_WALL", "PREPARED_STEP", "RESTART_EXT", "RESUME_STATE", "cut_back",
-    "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "record_earlier_wall", "record_prepared",
-    "read_text_if", "refuse_to_discard", "restart_interval_steps", "restart_name", "restart_steps", "resume_point", "run_log",
-    "run_log_parts", "start_fresh",
+    "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "read_text_if", "record_earlier_wall",
+    "record_prepared", "refuse_to_discard", "restart_interval_steps", "restart_name", "restart_steps",
+    "resume_point", "run_log", "run_log_parts", "start_fresh", "start_over",
 ]
 
 RESTART_EXT = "restart"
@@ -128,15 +128,22 @@ def start_over(work: Path, stem: str, hashes: Mapping[str, str], command: str, r
                why_not: str = "no snapshot after it, no resume from it") -> None:
     """A fresh working folder for a run from step 0 (RESUME_STATE records ``hashes``). Restart files
     of an earlier run in it are removed, saying so on standard error: ``--resume`` was asked but
-    none of them is certainly complete and usable (``why_not``), or they belong to other inputs
-    (:func:`refuse_to_discard` has refused the case where they are of the same inputs and
-    ``--resume`` was not asked)."""
+    none of them is certainly complete and usable (``why_not``), ``--force`` was given, or they
+    belong to other inputs (:func:`refuse_to_discard` refuses the case where they are of the same
+    inputs and neither option was given)."""
     import shutil
     import sys
 
     earlier = restart_steps(work, stem) if work.is_dir() else []
     if earlier:
-        why = f"none of them is certainly complete ({why_not})" if resume_asked else "they are of other inputs"
+        if resume_asked:
+            why = f"none of them is certainly complete ({why_not})"
+        else:
+            try:
+                same = json.loads((work / RESUME_STATE).read_text()) == dict(hashes)
+            except (OSError, ValueError):
+                same = False
+            why = "--force starts over" if same else "they are of other inputs"
         print(f"{command}: starting over: the restart files of an earlier run in {work} (steps "
               f"{earlier[0]}-{earlier[-1]}) are removed; {why}", file=sys.stderr)
     if work.exists():

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -89,7 +88,7 @@ class DistributionSpec(_Section):
         for name in _KIND_FIELDS_REQUIRED[self.kind]:
             if getattr(self, name) is None:
                 raise scene_problem(name, f"required for kind {self.kind}")
-        for kind, names in _KIND_FIELDS.items():
+        for names in _KIND_FIELDS.values():
             for name in names:
                 if name not in need and getattr(self, name) is not None:
                     used = " and ".join(k for k, n in _KIND_FIELDS.items() if name in n)
