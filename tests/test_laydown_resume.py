@@ -196,7 +196,8 @@ def test_resumed_runs_count_the_time_of_the_parts_before(tmp_path: Path) -> None
     none."""
     import json
 
-    from fiberform.stages.laydown import LOG_NAME, PREPARED_STEP, earlier_wall, prepare_resume
+    from fiberform.liggghts_restart import PREPARED_STEP
+    from fiberform.stages.laydown import LOG_NAME, earlier_wall, prepare_resume
 
     def log(*runs: tuple[int, int, float]) -> str:
         return "".join(f"Step Atoms\n {a} 8\n {b} 8\nLoop time of {t} on 2 procs for {b - a} steps with 8 atoms\n"
@@ -269,9 +270,8 @@ def test_a_resume_killed_before_its_first_snapshot_resumes_again(tmp_path: Path)
     19: the case-C run lost its 10 ms restart file this way and went back to 8 ms.)"""
     import json
 
-    from fiberform.liggghts_restart import RESUME_STATE
-    from fiberform.stages.laydown import (EARLIER_LOG, LOG_NAME, PREPARED_STEP, TRAJ_NAME, nodes_left,
-                                          prepare_resume, resume_point)
+    from fiberform.liggghts_restart import PREPARED_STEP, RESUME_STATE
+    from fiberform.stages.laydown import EARLIER_LOG, LOG_NAME, TRAJ_NAME, nodes_left, prepare_resume, resume_point
 
     work = tmp_path / "work"
     work.mkdir()

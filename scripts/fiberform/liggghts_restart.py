@@ -31,7 +31,7 @@ from .provenance import atomic_write_text
 __all__ = [
     "EARLIER_LOG", "EARLIER_WALL", "PREPARED_STEP", "RESTART_EXT", "RESUME_STATE", "cut_back",
     "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "read_text_if", "record_earlier_wall",
-    "record_prepared", "refuse_to_discard", "restart_interval_steps", "restart_name", "restart_steps",
+    "record_prepared", "recorded_inputs", "refuse_to_discard", "restart_interval_steps", "restart_name", "restart_steps",
     "resume_point", "run_log", "run_log_parts", "start_fresh", "start_over",
 ]
 
@@ -106,6 +106,15 @@ def start_fresh(work: Path, hashes: Mapping[str, str]) -> None:
     atomic_write_text(work / RESUME_STATE, json.dumps(dict(hashes), sort_keys=True))
 
 
+def recorded_inputs(work: Path) -> Any:
+    """The input hashes the working folder's run was started with (RESUME_STATE, a dict as
+    :func:`start_fresh` writes it), None when there is no readable record."""
+    try:
+        return json.loads((work / RESUME_STATE).read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def refuse_to_discard(work: Path, stem: str, hashes: Mapping[str, str], command: str) -> None:
     """Before a run that would start over (neither ``--resume`` nor ``--force``): ConfigError (exit
     status 2, nothing removed) when the working folder holds restart files of a killed run of the
@@ -113,13 +122,7 @@ def refuse_to_discard(work: Path, stem: str, hashes: Mapping[str, str], command:
     Restart files of other inputs cannot be resumed and go as before. ``command``: how the stage
     is called (``fiberform laydown SCENE``), for the message."""
     steps = restart_steps(work, stem) if work.is_dir() else []
-    if not steps:
-        return
-    try:
-        old = json.loads((work / RESUME_STATE).read_text())
-    except (OSError, ValueError):
-        return
-    if old == dict(hashes):
+    if steps and recorded_inputs(work) == dict(hashes):
         raise ConfigError(f"{work} holds restart files to step {steps[-1]} of a killed run of these inputs: "
                           f"`{command} --resume` continues it, `{command} --force` starts over and removes them")
 
@@ -139,11 +142,7 @@ def start_over(work: Path, stem: str, hashes: Mapping[str, str], command: str, r
         if resume_asked:
             why = f"none of them is certainly complete ({why_not})"
         else:
-            try:
-                same = json.loads((work / RESUME_STATE).read_text()) == dict(hashes)
-            except (OSError, ValueError):
-                same = False
-            why = "--force starts over" if same else "they are of other inputs"
+            why = "--force starts over" if recorded_inputs(work) == dict(hashes) else "they are of other inputs"
         print(f"{command}: starting over: the restart files of an earlier run in {work} (steps "
               f"{earlier[0]}-{earlier[-1]}) are removed; {why}", file=sys.stderr)
     if work.exists():
@@ -174,12 +173,8 @@ def resume_point(work: Path, hashes: Mapping[str, str], stem: str, traj: str,
     an earlier resume started from it (PREPARED_STEP; a resumed run killed before its first new
     snapshot must not lose that restart file). Raises StageError when the folder holds another
     run's files."""
-    state = work / RESUME_STATE
-    if not state.is_file():
-        return None
-    try:
-        old = json.loads(state.read_text())
-    except ValueError:
+    old = recorded_inputs(work)
+    if old is None:
         return None
     if old != dict(hashes):
         raise StageError(f"{work}: the restart files belong to other inputs (scene, upstream "

@@ -335,9 +335,7 @@ def _set_controls(case: Path, s: BoxSetup, lat: Lattice, record_flow_rate: bool)
         f["SIMPLE"]["residualControl"]["U"] = float(s.residual_tolerance)
     with FoamFile(case / "constant" / "transportProperties") as t:
         t["nu"] = s.viscosity_Pa_s / s.density_kg_m3
-    with FoamFile(case / "system" / "decomposeParDict") as d:
-        d["numberOfSubdomains"] = int(s.ranks)
-        d["coeffs"]["n"] = [int(s.ranks), 1, 1]
+    set_decomposition(case, s.ranks)
     # A point inside the topmost layer of cells, away from faces: seed of the connected fluid.
     hx, hy = s.size_x_m / lat.nx, s.size_y_m / lat.ny
     seed = [(lat.nx // 2 + 0.5) * hx, (lat.ny // 2 + 0.5) * hy, s.top_z_m - 0.25 * s.cell_size_m]
@@ -920,33 +918,37 @@ def read_patch_history(case: Path, name: str) -> tuple[FloatArray, FloatArray]:
     return np.array(ts, dtype=np.float64), np.array([history[t] for t in ts], dtype=np.float64)
 
 
-def cell_centres(case: Path, description: str = "writeCellCentres") -> npt.NDArray[np.float64]:
+def cell_centres(case: Path) -> npt.NDArray[np.float64]:
     """The cell centres of the mesh at time 0 (m, (cells, 3)): ``postProcess -func
     writeCellCentres`` (log ``log.writeCellCentres`` in the case), read, and the written fields
     removed again."""
-    from foamlib import FoamFieldFile
-
     run(["postProcess", "-func", "writeCellCentres", "-time", "0"], Path("log.writeCellCentres"), cwd=case,
-        description=description)
-    C = np.asarray(FoamFieldFile(case / "0" / "C").internal_field, dtype=np.float64).reshape(-1, 3)
+        description="writeCellCentres")
+    C = _read_internal(case / "0" / "C").reshape(-1, 3)
     for name in ("C", "Cx", "Cy", "Cz"):
         (case / "0" / name).unlink(missing_ok=True)
     return C
 
 
-def decompose(case: Path, ranks: int) -> None:
-    """Decompose the case for ``ranks`` ranks: slabs across x (method simple; Debian's OpenFOAM has
-    no scotch), ``decomposePar -force``; earlier processor folders go first."""
+def set_decomposition(case: Path, ranks: int) -> None:
+    """The case's decomposeParDict for ``ranks`` ranks: slabs across x (method simple; Debian's
+    OpenFOAM has no scotch)."""
     from foamlib import FoamFile
 
-    for stale in case.glob("processor*"):
-        shutil.rmtree(stale)
-    if ranks <= 1:
-        return
     with FoamFile(case / "system" / "decomposeParDict") as d:
         d["numberOfSubdomains"] = int(ranks)
         d["method"] = "simple"
         d["coeffs"]["n"] = [int(ranks), 1, 1]
+
+
+def decompose(case: Path, ranks: int) -> None:
+    """Decompose the case for ``ranks`` ranks (:func:`set_decomposition`, ``decomposePar
+    -force``); earlier processor folders go first."""
+    for stale in case.glob("processor*"):
+        shutil.rmtree(stale)
+    if ranks <= 1:
+        return
+    set_decomposition(case, ranks)
     run(["decomposePar", "-force"], Path("log.decomposePar"), cwd=case, description="decomposePar")
 
 

@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import math
-from typing import Literal
+from dataclasses import dataclass
+from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
@@ -181,7 +182,7 @@ class FiberGenerationSection(_Section):
     def _check(self) -> FiberGenerationSection:
         if self.fines_fraction > 0 and self.fines_length_m is None:
             raise scene_problem("fines_length_m", "required when fines_fraction > 0")
-        for key, (lo, hi, closed_hi) in DISTRIBUTION_RANGES.items():
+        for key, allowed in DISTRIBUTION_RANGES.items():
             spec: DistributionSpec | None = getattr(self, key)
             if spec is None:
                 continue
@@ -190,12 +191,12 @@ class FiberGenerationSection(_Section):
                     raise scene_problem(key, "kind data needs fiber_generation.data_csv", spec.kind)
                 continue
             s_lo, s_hi = spec.support()
-            if not (s_lo > lo and (s_hi <= hi if closed_hi else s_hi < hi)):
+            if not (allowed.contains(s_lo) and allowed.contains(s_hi)):
                 where = (f"the value {spec.value}" if spec.kind == "fixed" else
                          f"[low, high] = [{spec.low}, {spec.high}]" if spec.kind == "uniform" and
                          (spec.min is None and spec.max is None) else
                          f"the samples (kind {spec.kind}, truncated to [min, max] = [{spec.min}, {spec.max}])")
-                need = (f"({lo:g}, {hi:g}{']' if closed_hi else ')'}"
+                need = (str(allowed)
                         + ("" if spec.kind in ("fixed", "uniform") else ": truncate with min and max inside it"))
                 raise scene_problem(key, f"{where} must lie in {need}", spec.kind)
         if self.placement_lo_m is not None and self.placement_hi_m is not None and not all(
@@ -204,12 +205,26 @@ class FiberGenerationSection(_Section):
         return self
 
 
-#: the allowed open-closed value ranges of the sampled quantities: (lower bound, exclusive; upper
-#: bound; whether the upper bound is included). A data column's values are checked when the
+@dataclass(frozen=True)
+class ValueRange:
+    """The values a sampled quantity may take: (lo, hi], lo excluded, hi included."""
+
+    lo: float
+    hi: float
+
+    def contains(self, x: Any) -> Any:
+        """Whether x lies in the range (a number, or elementwise for an array)."""
+        return (x > self.lo) & (x <= self.hi)
+
+    def __str__(self) -> str:
+        return f"({self.lo:g}, {self.hi:g}]"
+
+
+#: the allowed values of the sampled quantities. A data column's values are checked when the
 #: generate stage reads the CSV (before anything is written).
-DISTRIBUTION_RANGES: dict[str, tuple[float, float, bool]] = {
-    "length_m": (0.0, 0.1, True),
-    "width_m": (0.0, 0.01, True),
-    "curvature_alpha": (0.0, 1.0, True),
-    "fines_length_m": (0.0, 0.1, True),
+DISTRIBUTION_RANGES: dict[str, ValueRange] = {
+    "length_m": ValueRange(0.0, 0.1),
+    "width_m": ValueRange(0.0, 0.01),
+    "curvature_alpha": ValueRange(0.0, 1.0),
+    "fines_length_m": ValueRange(0.0, 0.1),
 }

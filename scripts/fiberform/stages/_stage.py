@@ -57,6 +57,7 @@ from ..provenance import (
     write_provenance,
 )
 from ..liggghts_log import total_wall_time
+from ..liggghts_restart import refuse_to_discard
 from ..runner import Program, build_command, run
 from ..scene import Scene, section_hash
 
@@ -114,6 +115,8 @@ class Stage(abc.ABC):
     binaries: ClassVar[tuple[str, ...]] = ()
     #: True when the stage is split into prepare / programs / collect (see the module docstring).
     splits: ClassVar[bool] = False
+    #: Stem of the restart files its runs write in ``work/`` (``<stem>.<step>.restart``), or None.
+    restart_stem: ClassVar[str | None] = None
 
     # -- paths ---------------------------------------------------------------------------------
 
@@ -172,10 +175,14 @@ class Stage(abc.ABC):
         """Check the environment (binaries present, ...) before anything is written; raise
         StageError or ConfigError. The base does nothing."""
 
-    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:  # noqa: B027
-        """A run that starts over (neither ``--resume`` nor ``--force``) may do so: a stage whose
-        killed runs leave restart files raises ConfigError when starting over would discard a
-        resumable one (fiberform.liggghts_restart.refuse_to_discard). The base does nothing."""
+    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
+        """A run without ``--resume`` or ``--force`` of a stage whose runs leave restart files
+        (``restart_stem``, in its ``work/`` folder) must not discard those of a killed run of the
+        same inputs: ConfigError (fiberform.liggghts_restart.refuse_to_discard)."""
+        if self.restart_stem is None or ctx.force or ctx.options.get("resume"):
+            return
+        refuse_to_discard(self.stage_dir(ctx) / "work", self.restart_stem, hashes,
+                          f"fiberform {self.name} {ctx.scene_path}")
 
     def check_launch(self, ctx: StageContext) -> None:
         """A local run (:meth:`execute`): the stage's program lines can be launched here, their MPI
@@ -265,8 +272,7 @@ class Stage(abc.ABC):
                            "up to date")  # fmt: skip
         self.preflight(ctx)
         self.check_launch(ctx)
-        if not ctx.force and not ctx.options.get("resume"):
-            self.check_start_over(ctx, hashes)
+        self.check_start_over(ctx, hashes)
         started = self._begin(ctx, os.getpid())
         self._write_products(ctx, hashes, started, start,
                              lambda h5, tmp: self.produce(ctx, h5, tmp, hashes))
@@ -282,8 +288,7 @@ class Stage(abc.ABC):
         if not ctx.force and self.up_to_date(ctx, hashes):
             return False
         self.preflight(ctx)
-        if not ctx.force and not ctx.options.get("resume"):
-            self.check_start_over(ctx, hashes)
+        self.check_start_over(ctx, hashes)
         started = self._begin(ctx, os.getppid())
         prepared = self.stage_dir(ctx) / PREPARED_NAME
         prepared.unlink(missing_ok=True)

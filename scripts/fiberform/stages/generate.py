@@ -480,16 +480,16 @@ class Generate(Stage):
         except StageError as exc:
             raise ConfigError(f"fiber_generation.data_csv: {exc}") from None
         for key, col in wanted.items():
-            lo, hi, closed = DISTRIBUTION_RANGES[key]
+            allowed = DISTRIBUTION_RANGES[key]
             values = data.get(col)
             if values is None or values.size == 0:
                 raise ConfigError(f"fiber_generation.{key}: kind data reads column {col!r} of {path}, which "
                                   f"{'is empty' if values is not None else 'has no such column'} (columns: "
                                   f"{', '.join(sorted(data)) or 'none'})")
-            bad = values[~((values > lo) & ((values <= hi) if closed else (values < hi)))]
+            bad = values[~allowed.contains(values)]
             if bad.size:
                 raise ConfigError(f"fiber_generation.{key}: column {col!r} of {path} holds {bad.size} value(s) "
-                                  f"outside ({lo:g}, {hi:g}{']' if closed else ')'}), e.g. {bad[0]:g}")
+                                  f"outside {allowed}, e.g. {bad[0]:g}")
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:

@@ -56,9 +56,8 @@ from ..inputs import LiggghtsInput, file_token, fix_ref, jump_if_at_least, step_
 from .. import liggghts_restart
 from ..liggghts_log import dump_frame, read_dump
 from ..liggghts_restart import (
-    EARLIER_LOG, EARLIER_WALL, PREPARED_STEP, RESTART_EXT, cut_back, dump_snapshots, earlier_wall,
-    prepared_step, read_text_if, record_prepared, refuse_to_discard, restart_interval_steps, restart_name,
-    run_log, run_log_parts, start_over,
+    EARLIER_LOG, RESTART_EXT, cut_back, dump_snapshots, earlier_wall, prepared_step, read_text_if,
+    record_prepared, restart_interval_steps, restart_name, run_log, run_log_parts, start_over,
 )
 from ..openfoam_case import (
     CASE_DIR, DRAINAGE_FO, cell_centres, coupled_state, cut_coupled_back, decompose, prepare_coupled_case,
@@ -235,6 +234,7 @@ class Laydown(Stage):
     binaries = ("fiberdem",)
     code_version = 3
     splits = True
+    restart_stem = RESTART_STEM
 
     def metrics(self, ctx: StageContext) -> dict[str, float]:
         with h5py.File(self.product_paths(ctx)[0], "r") as h5:
@@ -336,9 +336,6 @@ class Laydown(Stage):
                 raise StageError(f"{lib} missing: coupling.fluid_ranks = {cp.fluid_ranks} needs "
                                  "OpenFOAM's libPstream rebuilt with the MPMD split (make setup, or "
                                  "scripts/setup/openfoam-pstream.sh; $FIBERFORM_PSTREAM_DIR)")
-
-    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
-        refuse_to_discard(self.stage_dir(ctx) / "work", RESTART_STEM, hashes, f"fiberform laydown {ctx.scene_path}")
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
         """The working folder: fresh (fibers.data, fibers.nodes, flow.grid copied in) or, with

@@ -59,7 +59,7 @@ from ..inputs import (
 )
 from ..liggghts_log import log_up_to_step, read_dump, thermo_rows
 from ..liggghts_restart import (
-    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared, refuse_to_discard,
+    EARLIER_LOG, RESTART_EXT, cut_back, earlier_wall, prepared_step, record_prepared,
     restart_interval_steps, restart_name, restart_steps, resume_point, run_log, run_log_parts, start_over,
 )
 from ..products import (
@@ -430,6 +430,7 @@ class Press(Stage):
     binaries = ("fiberdem",)
     code_version = 2  # 2: fiber-yarn overlaps element by element (session 28)
     splits = True
+    restart_stem = RESTART_STEM
 
     def input_hashes(self, ctx: StageContext) -> dict[str, str]:
         hashes = super().input_hashes(ctx)
@@ -491,9 +492,6 @@ class Press(Stage):
         if not (ctx.build_dir / "bin" / "fiberdem").is_file():
             raise StageError(f"{ctx.build_dir / 'bin' / 'fiberdem'} not found: build first")
         plan(ctx.scene, ctx.scene.output_path)  # a target thickness above the sheet: exit 2 now
-
-    def check_start_over(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
-        refuse_to_discard(self.stage_dir(ctx) / "work", RESTART_STEM, hashes, f"fiberform press {ctx.scene_path}")
 
     def prepare(self, ctx: StageContext, hashes: Mapping[str, str]) -> None:
         """The working folder: fresh (the lay-down's final restart file, the nodes of the fibers
