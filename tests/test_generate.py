@@ -183,9 +183,7 @@ domain:
   hi_m: [0.003, 0.003, 0.003]
 fibers:
   target_mass_kg: 1.0e-9
-  length_m: 1.0e-3
   width_m: 30.0e-6
-  segments: 10
   density_kg_m3: 1500.0
   youngs_modulus_Pa: 10.0e9
   shear_modulus_Pa: 4.0e9
@@ -299,6 +297,16 @@ BAD_GENERATION = {
                                  "  element_length_m: 0.1e-3\n  placement_lo_m: [0.0, 0.0, 2.0e-3]\n"
                                  "  placement_hi_m: [3.0e-3, 3.0e-3, 1.0e-3]",
                                  "fiber_generation.placement_hi_m", "must exceed placement_lo_m"),
+    # a fixed value beside its sampled replacement would reach nothing: one of them
+    "length given twice": ("  width_m: 30.0e-6\n", "  width_m: 30.0e-6\n  length_m: 1.0e-3\n",
+                           "fibers.length_m", "give one of fibers.length_m and fiber_generation.length_m"),
+    "segments beside element length": ("  width_m: 30.0e-6\n", "  width_m: 30.0e-6\n  segments: 10\n",
+                                       "fibers.segments", "give one of fibers.segments and "
+                                       "fiber_generation.element_length_m"),
+    "no length at all": ("  length_m: {kind: lognormal, mean: 1.0e-3, sd: 0.3e-3, min: 0.3e-3, max: 2.0e-3}\n", "",
+                         "fibers.length_m", "required unless fiber_generation.length_m"),
+    "no element count": ("  element_length_m: 0.1e-3\n", "", "fibers.segments",
+                         "required unless fiber_generation.element_length_m"),
 }
 
 

@@ -155,6 +155,12 @@ BAD_PERIODIC = {
     "fibers_longer_than_the_box": (
         ("length_m: 0.6e-3", "length_m: 1.0e-3"),
         ("fibers.length_m", "shorter than the periodic box")),
+    "sampled_lengths_reach_the_box": (  # the longest fiber the distribution allows counts
+        ("length_m: 0.6e-3, width_m: 20.0e-6, segments: 12,\n         youngs_modulus_Pa: 10.0e+9, "
+         "shear_modulus_Pa: 4.0e+9}\nfiber_generation: {",
+         "width_m: 20.0e-6, segments: 12,\n         youngs_modulus_Pa: 10.0e+9, shear_modulus_Pa: 4.0e+9}\n"
+         "fiber_generation: {length_m: {kind: uniform, low: 0.3e-3, high: 1.1e-3}, "),
+        ("fiber_generation.length_m", "shorter than the periodic box", "0.0011")),
 }
 
 

@@ -58,10 +58,11 @@ def _summary(scene: Scene, source: str) -> list[str]:
         amount = (
             f"{f.count} fibers" if f.count is not None else f"{f.target_mass_kg:g} kg of fibers"
         )
-        lines.append(
-            f"  fibers      {amount}, {f.length_m:g} m long, {f.width_m:g} m wide, "
-            f"{f.segments} segments, {f.cross_section}"
-        )
+        g = scene.fiber_generation
+        length = (f"{f.length_m:g} m long" if f.length_m is not None else "sampled length")
+        elements = (f"{f.segments} segments" if f.segments is not None else
+                    f"elements of {g.element_length_m:g} m" if g is not None and g.element_length_m else "")
+        lines.append(f"  fibers      {amount}, {length}, {f.width_m:g} m wide, {elements}, {f.cross_section}")
     if scene.contact is not None:
         c = scene.contact
         lines.append(

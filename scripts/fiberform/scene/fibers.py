@@ -22,15 +22,19 @@ class FibersSection(_Section):
     target_mass_kg: float | None = quantity(
         "Total fiber mass to insert (give this or count)", "kg", default=None, gt=0.0, le=1.0
     )
-    length_m: float = quantity("Fiber length", "m", gt=0.0, le=0.1)
+    length_m: float | None = quantity(
+        "Fiber length (required unless fiber_generation.length_m samples it; not both)", "m",
+        default=None, gt=0.0, le=0.1,
+    )
     width_m: float = quantity(
         "Fiber width (the diameter for a circular cross-section)", "m", gt=0.0, le=1.0e-3
     )
     thickness_m: float | None = quantity(
         "Fiber thickness (rectangular cross-section only)", "m", default=None, gt=0.0, le=1.0e-3
     )
-    segments: int = quantity(
-        "Segments per fiber (nodes = segments + 1)", "1", ge=1, le=1000
+    segments: int | None = quantity(
+        "Segments per fiber, nodes = segments + 1 (required unless fiber_generation.element_length_m "
+        "sets the element length; not both)", "1", default=None, ge=1, le=1000,
     )
     density_kg_m3: float = quantity("Fiber density", "kg/m^3", default=1500.0, gt=0.0, le=2.0e4)
     youngs_modulus_Pa: float = quantity(

@@ -104,6 +104,42 @@ class Scene(_Section):
         return self
 
     @model_validator(mode="after")
+    def _check_fiber_shape_fields(self) -> Scene:
+        """Each fiber shape setting in one place: the length in fibers.length_m or sampled by
+        fiber_generation.length_m, the elements per fiber in fibers.segments or from
+        fiber_generation.element_length_m (a field that the other one overrides would reach
+        nothing)."""
+        f, g = self.fibers, self.fiber_generation
+        if f is None:
+            return self
+        pairs = (("length_m", "length_m", "the fiber length"),
+                 ("segments", "element_length_m", "the elements per fiber"))
+        for own, gen, what in pairs:
+            given, sampled = getattr(f, own), (getattr(g, gen) if g is not None else None)
+            if given is not None and sampled is not None:
+                raise scene_problem(f"fibers.{own}", f"{what} is set by fiber_generation.{gen}: give one of "
+                                    f"fibers.{own} and fiber_generation.{gen}, not both", given)
+            if given is None and sampled is None:
+                raise scene_problem(f"fibers.{own}", f"required unless fiber_generation.{gen} is given ({what})")
+        return self
+
+    def longest_fiber_m(self) -> float | None:
+        """The longest fiber the generate stage can make, m: fibers.length_m, or the upper end of
+        the support of fiber_generation.length_m (and fines_length_m); None without fibers, inf for
+        an untruncated or data distribution."""
+        f, g = self.fibers, self.fiber_generation
+        if f is None:
+            return None
+        if f.length_m is not None:
+            longest = f.length_m
+        else:
+            assert g is not None and g.length_m is not None  # _check_fiber_shape_fields
+            longest = g.length_m.support()[1]
+        if g is not None and g.fines_fraction > 0 and g.fines_length_m is not None:
+            longest = max(longest, g.fines_length_m.support()[1])
+        return longest
+
+    @model_validator(mode="after")
     def _check_periodic(self) -> Scene:
         """laydown.walls periodic: a one-way lay-down on a generated fabric of whole weave repeats
         that fills the domain in x and y, with fibers shorter than the period (the yarns are tiled
@@ -135,12 +171,15 @@ class Scene(_Section):
                     raise scene_problem(f"domain.hi_m[{axis}]", "laydown.walls periodic: the periodic "
                                         f"box is the fabric piece, ending at {size!r} m "
                                         f"(fabric.{('size_x_m', 'size_y_m')[axis]})", dom.hi_m[axis])
-        f = self.fibers
         period = min(fab.size_x_m, fab.size_y_m)
-        if f is not None and f.length_m >= period:
-            raise scene_problem("fibers.length_m", "laydown.walls periodic needs fibers shorter than "
-                                f"the periodic box ({period!r} m, the smaller fabric size): the yarns "
-                                "are tiled over one periodic image on each side", f.length_m)
+        longest = self.longest_fiber_m()
+        if longest is not None and longest >= period:
+            field = ("fibers.length_m" if self.fibers is not None and self.fibers.length_m is not None
+                     else "fiber_generation.length_m")
+            raise scene_problem(field, "laydown.walls periodic needs fibers shorter than the periodic box "
+                                f"({period!r} m, the smaller fabric size): the yarns are tiled over one "
+                                "periodic image on each side; a sampled length (and fines length) needs a "
+                                "max below it", longest)
         return self
 
     @property

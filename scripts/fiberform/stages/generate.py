@@ -352,7 +352,7 @@ def generate_fibers(
     length: Sampler,
     width: Sampler,
     curvature: Sampler,
-    segments: int,
+    segments: int | None,
     element_length_m: float | None = None,
     cross_section: str = "circular",
     aspect: float = 0.25,
@@ -374,6 +374,8 @@ def generate_fibers(
     the placed fibers' periodic images too. Without it every fiber lies inside the placement box."""
     if (target_mass_kg is None) == (count is None):
         raise ValueError("give exactly one of target_mass_kg and count")
+    if (segments is None) == (element_length_m is None):
+        raise ValueError("give exactly one of segments and element_length_m")
     box_lo, box_hi = np.asarray(box_lo, float), np.asarray(box_hi, float)
     out: list[GeneratedFiber] = []
     total = 0.0
@@ -382,7 +384,11 @@ def generate_fibers(
         fine = fines_fraction > 0 and rng.uniform() < fines_fraction
         L = float((fines_length if fine and fines_length is not None else length).sample(rng)[0])
         w = float(width.sample(rng)[0])
-        n = segments if element_length_m is None else max(2, round(L / element_length_m))
+        if segments is not None:
+            n = segments
+        else:
+            assert element_length_m is not None
+            n = max(2, round(L / element_length_m))
         alpha = curvature.sample(rng, 2 * (n + 1)).reshape(2, n + 1)
         shape = FiberShape(length_m=L, width_m=0.5 * w, alpha=alpha, segments=n,
                            cross_section="circular" if cross_section == "circular" else "collapsed",
