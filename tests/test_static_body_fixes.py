@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import re
+import subprocess
 import sys
 from pathlib import Path
 
@@ -34,7 +35,7 @@ from fiberform.fiber_io import Fiber, quat_from_frames, write_fibers_liggghts, w
 from fiberform.fiber_sheet import element_clearance
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from beam_cases import Case, run_case, run_fiberdem_thermo, straight_chain  # noqa: E402
+from beam_cases import ENV, Case, run_case, run_fiberdem_thermo, straight_chain  # noqa: E402
 
 pytestmark = pytest.mark.system
 
@@ -231,3 +232,39 @@ def test_friction_stick_sets_the_creep_of_a_stuck_fiber(fiberdem_build: Path, tm
         want = 0.3 * g * dt / k / np.sqrt(1.0 - (0.3 / mu) ** 2)
         assert abs(speeds[k] / want - 1.0) < 0.05, (k, speeds[k], want)
     assert speeds[1.0] > 5.0 * speeds[10.0]
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("case", ["missing yarns file", "missing flow grid", "malformed yarns file"])
+def test_an_unreadable_input_file_ends_every_rank_naming_it(fiberdem_build: Path, tmp_path: Path, ranks: int,
+                                                             case: str) -> None:
+    """The yarns file of fix wall/fiber/yarns and the flow grid of fix fiber/drag are read on rank 0
+    and broadcast (style_args.h read_file_everywhere): a file that cannot be read, or a malformed
+    one, ends the run on every rank with a message naming the style and the file, no rank left
+    waiting in a collective call (the timeout), on 1 and 2 ranks."""
+    write_fibers_liggghts(tmp_path / "data.fib", tmp_path / "nodes.fib", [_fiber(c, 0) for c in CROSS[:2]], LO, HI,
+                          density_kg_m3=RHO)
+    (tmp_path / "bad_yarns.txt").write_text("0 0.35e-3 -0.1e-3 0.0 50e-6\n0 0.35e-3 1.3e-3\n")
+    drag, yarns, words = {
+        "missing yarns file": ("flow uniform 0 0 -5e-2", "missing_yarns.txt",
+                               "fix wall/fiber/yarns: yarns file: cannot read missing_yarns.txt"),
+        "missing flow grid": ("flow grid missing.grid", "bad_yarns.txt",
+                              "fix fiber/drag: flow grid: cannot read missing.grid"),
+        "malformed yarns file": ("flow uniform 0 0 -5e-2", "bad_yarns.txt",
+                                 "bad_yarns.txt:2: expected 'yarn-index x y z radius'"),
+    }[case]
+    lines = ["units si", f"processors {ranks} 1 1", "atom_style sphere", "atom_modify map array sort 0 0.0",
+             "boundary f f f", "newton on", "communicate single vel yes", "read_data data.fib",
+             f"neighbor {0.1 * R!r} bin", "neigh_modify delay 0",
+             f"fix beam all fiber/beam nodes nodes.fib E 10e9 G 4e9 density {RHO!r}",
+             f"fix drag all fiber/drag {drag} fluid_density 1000 viscosity 1e-3 gravity 0 0 -9.81",
+             f"fix yarns all wall/fiber/yarns yarns {yarns} terms steric implicit_force newton",
+             "timestep 1e-6", "run 10"]
+    (tmp_path / "in.fiberdem").write_text("\n".join(lines) + "\n")
+    mpi = ["mpirun", "--oversubscribe", "-np", str(ranks)] if ranks > 1 else []
+    proc = subprocess.run([*mpi, str(fiberdem_build / "bin" / "fiberdem"), "-in", "in.fiberdem", "-log",
+                           "log.fiberdem", "-screen", "none"], cwd=tmp_path, env=ENV, capture_output=True,
+                          text=True, errors="replace", timeout=120)
+    log = (tmp_path / "log.fiberdem").read_text(errors="replace")
+    assert proc.returncode != 0
+    assert words in log, log[-2000:] + proc.stderr[-2000:]

@@ -20,14 +20,14 @@ namespace {
 double number(LAMMPS *lmp, const char *style, const char *kw, int iarg, int narg, char **arg, bool positive) {
   if (iarg >= narg) {
     std::string m = std::string(style) + ": keyword '" + kw + "' needs a value";
-    lmp->error->all(FLERR, m.c_str());
+    lmp->error->all(FLERR, error_text(m));
   }
   char *end = nullptr;
   const double v = std::strtod(arg[iarg], &end);
   if (end == arg[iarg] || *end != '\0' || !std::isfinite(v) || (positive && !(v > 0))) {
     std::string m = std::string(style) + ": keyword '" + kw + "': '" + arg[iarg] + "' is not " +
                     (positive ? "a finite number > 0" : "a finite number");
-    lmp->error->all(FLERR, m.c_str());
+    lmp->error->all(FLERR, error_text(m));
   }
   return v;
 }
@@ -35,7 +35,7 @@ bool yesno(LAMMPS *lmp, const char *style, const char *kw, int iarg, int narg, c
   if (iarg < narg && std::strcmp(arg[iarg], "yes") == 0) return true;
   if (iarg < narg && std::strcmp(arg[iarg], "no") == 0) return false;
   std::string m = std::string(style) + ": keyword '" + kw + "' expects yes or no";
-  lmp->error->all(FLERR, m.c_str());
+  lmp->error->all(FLERR, error_text(m));
   return false;
 }
 }  // namespace
@@ -86,7 +86,7 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
       else if (w == "es") t |= physics::kEs;
       else if (w == "steric") t |= physics::kSteric;
       else if (w == "none") t |= 0;
-      else lmp->error->all(FLERR, ("terms: unknown term '" + w + "' (vdw, es, steric, none)").c_str());
+      else lmp->error->all(FLERR, error_text("terms: unknown term '" + w + "' (vdw, es, steric, none)"));
       if (e == std::string::npos) break;
       pos = e + 1;
     }
@@ -164,7 +164,7 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
   if (!std::strcmp(kw, "frozen")) {
     if (iarg + 1 >= narg) lmp->error->all(FLERR, "frozen: expected a group ID");
     const int g = lmp->group->find(arg[iarg + 1]);
-    if (g < 0) lmp->error->all(FLERR, (std::string("frozen: unknown group ") + arg[iarg + 1]).c_str());
+    if (g < 0) lmp->error->all(FLERR, error_text(std::string("frozen: unknown group ") + arg[iarg + 1]));
     c.frozen_groupbit = lmp->group->bitmask[g];
     return 2;
   }
@@ -174,7 +174,7 @@ int parse_contact_keyword(LAMMPS *lmp, const char *style, EngineConfig &c, int i
 void validate_contact_config(LAMMPS *lmp, const char *style, EngineConfig &c) {
   physics::ContactLaw &L = c.law;
   L.steric.h0 = L.h0;
-  auto fail = [&](const char *m) { lmp->error->all(FLERR, (std::string(style) + ": " + m).c_str()); };
+  auto fail = [&](const char *m) { lmp->error->all(FLERR, error_text(std::string(style) + ": " + m)); };
   if (!(L.steric.h_R > 0 && L.steric.h_R < L.h0)) fail("h_R must satisfy 0 < h_R < h0");
   if (!(L.h_cut > L.h0)) fail("h_cut must be larger than h0");
   if (c.section == Section::Rect && !(c.width > 0 && c.thickness > 0)) fail("section rect needs W > 0 and T > 0");

@@ -125,7 +125,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     if (std::strcmp(arg[iarg + 1], yes) == 0) return true;
     if (std::strcmp(arg[iarg + 1], no) == 0) return false;
     const std::string m = std::string("fix fiber/beam: keyword '") + kw + "' takes '" + yes + "' or '" + no + "'";
-    error->all(FLERR, m.c_str());
+    error->all(FLERR, fiberform::error_text(m));
     return false;
   };
   for (int iarg = 3; iarg < narg;) {

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <sstream>
 #include <string>
 
 #include "atom.h"
@@ -50,8 +51,10 @@ FixFiberDrag::FixFiberDrag(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
         iarg += 5;
       } else if (kind == "grid") {
         need(2);
+        // read on rank 0 and broadcast, parsed on every rank (a bad file fails all of them alike)
+        std::istringstream bytes(fiberform::read_file_everywhere(lmp, "fix fiber/drag: flow grid", arg[iarg + 2]));
         try {
-          flow_ = std::make_unique<flow::GridFlow>(flow::read_flow_grid(arg[iarg + 2]));
+          flow_ = std::make_unique<flow::GridFlow>(flow::read_flow_grid(bytes, arg[iarg + 2]));
         } catch (const std::exception &e) {
           error->all(FLERR, fiberform::error_text(std::string("fix fiber/drag: flow grid: ") + e.what()));
         }

@@ -25,7 +25,7 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
     char *end = nullptr;
     v[k] = std::strtod(arg[4 + k], &end);
     if (end == arg[4 + k] || *end || !std::isfinite(v[k]))
-      error->all(FLERR, (std::string(style) + ": plane: '" + arg[4 + k] + "' is not a number").c_str());
+      error->all(FLERR, fiberform::error_text(std::string(style) + ": plane: '" + arg[4 + k] + "' is not a number"));
   }
   fiberform::Vec3 n{v[3], v[4], v[5]};
   const double nn = fiberform::physics::norm(n);
@@ -72,8 +72,8 @@ FixWallFiberDlvo::FixWallFiberDlvo(LAMMPS *lmp, int narg, char **arg)
     }
     const int used = fiberform::parse_contact_keyword(lmp, style, cfg, iarg, narg, arg);
     if (used == 0)
-      error->all(FLERR, (std::string(style) + ": unknown keyword '" + arg[iarg] +
-                         "' (see docs/styles/fix_wall_fiber_dlvo.md)").c_str());
+      error->all(FLERR, fiberform::error_text(std::string(style) + ": unknown keyword '" + arg[iarg] +
+                                              "' (see docs/styles/fix_wall_fiber_dlvo.md)"));
     iarg += used;
   }
   fiberform::validate_contact_config(lmp, style, cfg);

@@ -10,7 +10,6 @@
 #include <array>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -73,8 +72,7 @@ FixWallFiberYarns::FixWallFiberYarns(LAMMPS *lmp, int narg, char **arg)
 }
 
 void FixWallFiberYarns::read_yarns(const char *path) {
-  std::ifstream in(path);
-  if (!in) error->all(FLERR, fiberform::error_text(std::string(kStyle) + ": cannot open yarns file " + path));
+  std::istringstream in(fiberform::read_file_everywhere(lmp, std::string(kStyle) + ": yarns file", path));
   std::string line;
   int prev_yarn = -1;
   std::array<double, 3> prev{0, 0, 0};

@@ -14,6 +14,7 @@
 #include "neigh_list.h"
 #include "neigh_request.h"
 #include "neighbor.h"
+#include "style_args.h"
 #include "update.h"
 
 using namespace LAMMPS_NS;
@@ -51,8 +52,8 @@ void PairFiberDlvo::settings(int narg, char **arg) {
   while (iarg < narg) {
     const int used = fiberform::parse_contact_keyword(lmp, "pair_style fiber/dlvo", cfg, iarg, narg, arg);
     if (used == 0)
-      error->all(FLERR, (std::string("pair_style fiber/dlvo: unknown keyword '") + arg[iarg] +
-                         "' (see docs/styles/pair_fiber_dlvo.md)").c_str());
+      error->all(FLERR, fiberform::error_text(std::string("pair_style fiber/dlvo: unknown keyword '") + arg[iarg] +
+                                              "' (see docs/styles/pair_fiber_dlvo.md)"));
     iarg += used;
   }
   fiberform::validate_contact_config(lmp, "pair_style fiber/dlvo", cfg);

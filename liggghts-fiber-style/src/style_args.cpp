@@ -1,9 +1,14 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 #include "style_args.h"
 
+#include <mpi.h>
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <sstream>
 
 #include "comm.h"
 #include "error.h"
@@ -49,6 +54,32 @@ void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *me
   }
   lmp->error->one(file, line, text);
   std::abort();  // not reached: Error::one aborts
+}
+
+std::string read_file_everywhere(LAMMPS_NS::LAMMPS *lmp, const std::string &style, const std::string &path) {
+  MPI_Comm world = lmp->world;
+  std::string content, why;
+  long long size = 0;
+  if (lmp->comm->me == 0) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream all;
+    if (!in || !(all << in.rdbuf())) {
+      why = "cannot read " + path;
+      size = -1;
+    } else {
+      content = all.str();
+      size = static_cast<long long>(content.size());
+      if (size > std::numeric_limits<int>::max()) {
+        why = path + ": larger than 2 GiB (one broadcast)";
+        size = -1;
+      }
+    }
+  }
+  MPI_Bcast(&size, 1, MPI_LONG_LONG, 0, world);
+  if (size < 0) lmp->error->all(FLERR, error_text(style + ": " + why));  // printed by rank 0, which knows why
+  content.resize(static_cast<std::size_t>(size));
+  if (size > 0) MPI_Bcast(content.data(), static_cast<int>(size), MPI_CHAR, 0, world);
+  return content;
 }
 
 void write_global_restart(LAMMPS_NS::LAMMPS *lmp, FILE *fp, const double *values, int n) {

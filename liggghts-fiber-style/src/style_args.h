@@ -35,6 +35,12 @@ long long parse_count(LAMMPS_NS::Error *error, const std::string &style, const s
 // screen (a run started by Python) or in the log file is otherwise lost.
 [[noreturn]] void fail_one(LAMMPS_NS::LAMMPS *lmp, const char *file, int line, const char *message);
 
+// The whole content of an input file, read on rank 0 and broadcast to every rank (one reader, and a
+// file that rank 0 cannot read ends every rank with error->all naming ``style`` and the path,
+// instead of one rank failing while the others wait in the next collective call). Parse the
+// returned bytes on every rank: a parse error is then found on all of them alike.
+std::string read_file_everywhere(LAMMPS_NS::LAMMPS *lmp, const std::string &style, const std::string &path);
+
 // A fix's global restart record (Fix::write_restart): n doubles, written by rank 0 behind their
 // size in bytes, as LIGGGHTS reads them back into Fix::restart(buf).
 void write_global_restart(LAMMPS_NS::LAMMPS *lmp, FILE *fp, const double *values, int n);

@@ -143,10 +143,9 @@ class GridFlow final : public FlowField {
   RegularGrid grid_;
 };
 
-/// Read the binary companion file (format in the file comment). Throws std::runtime_error.
-inline RegularGrid read_flow_grid(const std::string &path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot open flow grid file " + path);
+/// Parse the binary companion file (format in the file comment) from a stream; ``path`` names it
+/// in the messages. Throws std::runtime_error.
+inline RegularGrid read_flow_grid(std::istream &in, const std::string &path) {
   char magic[8];
   in.read(magic, 8);
   if (!in || std::memcmp(magic, "FFGRID1\n", 8) != 0)
@@ -164,6 +163,13 @@ inline RegularGrid read_flow_grid(const std::string &path) {
   if (!in) throw std::runtime_error(path + ": truncated data");
   g.validate();
   return g;
+}
+
+/// Read the binary companion file. Throws std::runtime_error.
+inline RegularGrid read_flow_grid(const std::string &path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot open flow grid file " + path);
+  return read_flow_grid(in, path);
 }
 
 /// Write the binary companion file (used by tests; the Python flow stage writes the same format).
