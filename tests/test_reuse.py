@@ -25,7 +25,7 @@ import yaml
 from fiberform import campaign as cp
 from fiberform.errors import ConfigError
 from fiberform.pipeline import plan_run, run_pipeline
-from fiberform.reuse import adopt_stages
+from fiberform.reuse import ADOPTED_NAME, adopt_stages
 from fiberform.scene import parse_scene
 from fiberform.stages import STAGES, StageContext
 
@@ -65,6 +65,11 @@ def test_copied_stages_are_skipped(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert [o.skipped for o in outcomes] == [True, True], lines
     for f in ("fibers/fibers.h5", "fibers/fibers.nodes", "fabric/fabric.h5"):
         assert Path("runs/target", f).read_bytes() == Path("runs/donor", f).read_bytes()
+    for stage, folder in (("generate", "fibers"), ("fabric", "fabric")):  # where each copy came from
+        rec = json.loads(Path("runs/target", folder, ADOPTED_NAME).read_text())
+        assert rec["stage"] == stage and rec["into_scene"] == "target.yaml"
+        assert rec["adopted_from"] == str(Path("runs/donor", folder).resolve())
+        assert rec["input_hashes"] == STAGES[stage].input_hashes(target)
     assert _actions(adopt_stages(target, Path("runs/donor"), ["generate", "fabric"])) == {
         "generate": "kept", "fabric": "kept"}
     # another seed: the fabric is the same, the fibers are not (nothing written for them)

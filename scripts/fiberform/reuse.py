@@ -8,7 +8,10 @@ run, but only where the stage mechanism itself will then find the copy up to dat
 HDF5 product must record exactly the input hashes that the target's stage computes now
 (:meth:`fiberform.stages.Stage.input_hashes`, :meth:`~fiberform.stages.Stage.up_to_date`). So a
 copied stage is skipped by ``fiberform run``, and a stage whose inputs differ is not copied at
-all: it runs as usual.
+all: it runs as usual. The copied products are left byte for byte as the donor made them (the
+downstream stages hash them), so they name the donor's scene in their provenance; the copy's
+``ADOPTED_NAME`` (``adopted.json``) records where it came from, into which scene, and the input
+hashes that made it valid.
 
 Users: ``bench/laydown/run_thesis.py`` (the generate, fabric and flow stages of another variant of
 the same case and seed) and the validation campaign (:mod:`fiberform.campaign`: the pressure
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from datetime import datetime, timezone
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +35,10 @@ from .provenance import read_provenance
 from .stages import StageContext
 from .stages._stage import STATE_NAME
 
-__all__ = ["Adoption", "adopt_stages"]
+__all__ = ["ADOPTED_NAME", "Adoption", "adopt_stages"]
+
+#: the record of a copied stage folder (donor folder, target scene, input hashes, time)
+ADOPTED_NAME = "adopted.json"
 
 Action = Literal["kept", "copied", "absent", "differs", "busy"]
 
@@ -109,6 +116,10 @@ def adopt_stages(target: StageContext, donor_root: Path, stages: Sequence[str]) 
         tmp = dst.with_name(dst.name + ".adopting")
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.copytree(src, tmp)
+        (tmp / ADOPTED_NAME).write_text(json.dumps({
+            "stage": name, "adopted_from": str(src.resolve()), "into_scene": str(target.scene_path),
+            "input_hashes": dict(hashes), "time": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        }, indent=1) + "\n")
         if dst.exists():
             shutil.rmtree(dst)
         tmp.rename(dst)
