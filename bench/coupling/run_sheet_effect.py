@@ -4,10 +4,10 @@
 (issue 13, benchmark "Effect on the sheet"; issue 15, open question (c)), compared at common times.
 
 The scene is the validation campaign's point (``bench/thesis/run.py``'s derivation,
-:func:`fiberform.campaign.point_scene`: scenes/thesis/campaign.yaml on the case-A scene of the
-section, default point C circular, seed 1) with the lay-down on ``--ranks`` fiber ranks (default
+:func:`fiberform.campaign.point_scene`: ``--campaign``, default scenes/thesis/campaign.yaml, on the
+case-A scene of the section; default point C circular, seed 1) with the lay-down on ``--ranks`` fiber ranks (default
 1: the pile's contact cluster is solved on one rank, docs/bench/laydown.md) and restart files every
-``--restart`` s. Two copies differ only in ``coupling``: absent (one-way, the flow stage's frozen
+``--restart`` s (``--max-time``: a shorter lay-down). Two copies differ only in ``coupling``: absent (one-way, the flow stage's frozen
 flow) and ``{mode: two_way, interval: N, fluid_ranks: 1}``. The fabric and flow stages run once
 (the one-way copy's) and are copied to the two-way run; each lay-down generates its fibers itself
 (the same seed: the comparison checks they are identical). The two lay-downs run at the same time
@@ -47,36 +47,41 @@ import numpy as np
 import yaml
 
 from fiberform import campaign as cp
+from fiberform._versions import build_revision, git_revision, package_version
 from fiberform.fiber_sheet import fiber_com_speeds, frame_fibers, sheet_thickness_above_fabric
 from fiberform.liggghts_log import Frame, read_dump
 from fiberform.openfoam_case import DRAINAGE_FO, read_patch_history
 from fiberform.products import FABRIC_H5, FIBERS_H5, read_superficial_velocity, read_yarns
-from fiberform.provenance import atomic_write_text, machine_info
+from fiberform.provenance import atomic_write_text, file_hash, machine_info
 from fiberform.scene import Scene, load_scene
 from fiberform.stages.laydown import FLUID_CASE, settle_speed
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-THESIS = ROOT / "scenes" / "thesis"
 PROFILE_DZ = 10e-6  # m: the slabs of the mass profile
 NAMES = ("one_way", "two_way")
 
 
-def scenes(point: str, section: str, ranks: int, restart: float, interval: int, runs: Path) -> dict[str, Path]:
-    """Write the two scenes (one-way, two-way) of the campaign point under ``runs``."""
-    c = cp.load_campaign(THESIS / "campaign.yaml")
-    pts = {p.name: p for p in cp.points(c, cp.read_experiments(THESIS / "experiments.csv"))}
+def scenes(campaign: Path, point: str, section: str, ranks: int, restart: float, interval: int,
+           max_time: float | None, runs: Path) -> dict[str, Path]:
+    """Write the two scenes (one-way, two-way) of the campaign point under ``runs`` (relative to
+    the working directory, as their output folders)."""
+    c = cp.load_campaign(campaign)
+    folder = campaign.resolve().parent
+    pts = {p.name: p for p in cp.points(c, cp.read_experiments(folder / "experiments.csv"))}
     if point not in pts:
         raise SystemExit(f"--point {point}: allowed {', '.join(pts)}")
-    base = cp.point_scene(c, pts[point], section, THESIS, runs)  # type: ignore[arg-type]
+    base = cp.point_scene(c, pts[point], section, folder, runs)  # type: ignore[arg-type]
     base.pop("press", None)
     base["laydown"].update({"ranks": ranks, "restart_interval_s": restart})
+    if max_time is not None:
+        base["laydown"]["max_time_s"] = max_time
     out: dict[str, Path] = {}
     for name in NAMES:
         data = {**base, "name": f"sheet_effect_{point}_{section}_{name}", "output_dir": str(runs / name)}
         if name == "two_way":
             data["coupling"] = {"mode": "two_way", "interval": interval, "fluid_ranks": 1}
-        path = ROOT / runs / f"{name}.yaml"
+        path = runs / f"{name}.yaml"
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, f"# {name} lay-down of campaign point {point} {section}: written by "
                           "bench/coupling/run_sheet_effect.py\n" + yaml.safe_dump(data, sort_keys=False))
@@ -85,12 +90,15 @@ def scenes(point: str, section: str, ranks: int, restart: float, interval: int, 
     return out
 
 
+def build_dir() -> Path:
+    return Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
+
+
 def run(paths: dict[str, Path], resume: bool) -> None:
-    build = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
-    cmd = [sys.executable, "-m", "fiberform", "run", "--build-dir", str(build)]
-    if subprocess.run([*cmd, str(paths["one_way"]), "--to", "flow"], cwd=ROOT).returncode != 0:
+    cmd = [sys.executable, "-m", "fiberform", "run", "--build-dir", str(build_dir())]
+    if subprocess.run([*cmd, str(paths["one_way"]), "--to", "flow"]).returncode != 0:
         raise SystemExit("the one-way scene's fabric and flow stages failed")
-    src, dst = (ROOT / load_scene(paths[n]).output_path for n in NAMES)
+    src, dst = (load_scene(paths[n]).output_path for n in NAMES)
     for stage in ("fabric", "flow"):
         if not (dst / stage).exists():
             shutil.copytree(src / stage, dst / stage, symlinks=True)
@@ -98,7 +106,7 @@ def run(paths: dict[str, Path], resume: bool) -> None:
     for name in NAMES:
         log = (paths[name].parent / f"{name}.log").open("a")
         procs.append(subprocess.Popen([*cmd, str(paths[name]), "--to", "laydown", *(["--resume"] if resume else [])],
-                                      cwd=ROOT, stdout=log, stderr=subprocess.STDOUT))
+                                      stdout=log, stderr=subprocess.STDOUT))
     codes = [p.wait() for p in procs]
     if any(codes):
         raise SystemExit(f"lay-downs ended with {codes} (logs beside the scenes)")
@@ -123,7 +131,7 @@ def frame_measures(scene: Scene, fr: Frame, fibers_h5: Path, top: float, bins: i
            / np.add.reduceat(m_node, starts)[:, None])
     return {
         "fibers": int(len(present)), "mass_fraction": float(mass[present].sum() / mass.sum()),
-        "fines_fraction": float(fine[present].sum() / max(1, fine.sum())),
+        "fines_fraction": float(fine[present].sum() / fine.sum()) if fine.any() else None,  # None: no fines
         "settled_grammage_kg_m2": float(m_f[v_f < v_settle].sum() / (sx * sy)),
         "thickness_above_fabric_m": sheet_thickness_above_fabric(scene, x, offsets, present, top),
         "node_height_50_90_99_m": [float(h) - top for h in np.percentile(x[:, 2], [50, 90, 99])],
@@ -135,7 +143,7 @@ def frame_measures(scene: Scene, fr: Frame, fibers_h5: Path, top: float, bins: i
 def compare(paths: dict[str, Path], every: float, bins: int, dt: float) -> dict[str, Any]:
     """The table of the module docstring, one row per common time."""
     sc = {n: load_scene(paths[n]) for n in NAMES}
-    out = {n: ROOT / sc[n].output_path for n in NAMES}
+    out = {n: sc[n].output_path for n in NAMES}
     with h5py.File(out["one_way"] / FIBERS_H5, "r") as a, h5py.File(out["two_way"] / FIBERS_H5, "r") as b:
         if not np.array_equal(a["fibers/x"][...], b["fibers/x"][...]):
             raise SystemExit("the two runs generated different fibers: not a controlled comparison")
@@ -181,6 +189,10 @@ def compare(paths: dict[str, Path], every: float, bins: int, dt: float) -> dict[
             "last_snapshot_s": {n: max(frames[n]) * dt if frames[n] else 0.0 for n in NAMES}}
 
 
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
 def print_table(res: dict[str, Any]) -> None:
     print("| t (ms) | fibers 1w / 2w | fines kept 1w / 2w | settled g/m^2 1w / 2w | thickness above fabric "
           "1w / 2w (um) | grammage map RMS / max diff | profile max diff | same fiber apart, median / 90 % "
@@ -188,7 +200,7 @@ def print_table(res: dict[str, Any]) -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for r in res["rows"]:
         print(f"| {r['time_s'] * 1e3:.1f} | {r['one_way_fibers']} / {r['two_way_fibers']} | "
-              f"{r['one_way_fines_fraction']:.3f} / {r['two_way_fines_fraction']:.3f} | "
+              f"{_share(r['one_way_fines_fraction'])} / {_share(r['two_way_fines_fraction'])} | "
               f"{r['one_way_settled_grammage_kg_m2'] * 1e3:.2f} / {r['two_way_settled_grammage_kg_m2'] * 1e3:.2f} | "
               f"{r['one_way_thickness_above_fabric_m'] * 1e6:.1f} / {r['two_way_thickness_above_fabric_m'] * 1e6:.1f} | "
               f"{r['grammage_map_rms_diff_rel'] * 100:.1f} % / {r['grammage_map_max_diff_rel'] * 100:.1f} % | "
@@ -199,12 +211,17 @@ def print_table(res: dict[str, Any]) -> None:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--point", default="C", help="campaign point (scenes/thesis/campaign.yaml), default C")
+    ap.add_argument("--campaign", type=Path, default=ROOT / "scenes" / "thesis" / "campaign.yaml",
+                    help="campaign definition (default scenes/thesis/campaign.yaml)")
+    ap.add_argument("--point", default="C", help="campaign point, default C")
     ap.add_argument("--section", choices=("circular", "rectangular"), default="circular")
     ap.add_argument("--ranks", type=int, default=1, help="fiber ranks of each lay-down (default 1)")
     ap.add_argument("--interval", type=int, default=100, help="two-way exchange interval, fiber steps (default 100)")
     ap.add_argument("--restart", type=float, default=1e-3, help="restart file interval, s (default 1e-3)")
-    ap.add_argument("--runs", type=Path, default=None, help="run folder, relative (default runs/sheet-effect-POINT-SECTION)")
+    ap.add_argument("--max-time", type=float, default=None,
+                    help="lay-down end time, s (default: the campaign scene's max_time_s)")
+    ap.add_argument("--runs", type=Path, default=None,
+                    help="run folder relative to the working directory (default runs/sheet-effect-POINT-SECTION)")
     ap.add_argument("--resume", action="store_true", help="continue killed lay-downs from their restart files")
     ap.add_argument("--compare", action="store_true", help="run nothing: compare what the runs have")
     ap.add_argument("--every", type=float, default=2e-3, help="--compare: time between rows, s (default 2e-3)")
@@ -213,18 +230,21 @@ def main() -> int:
     a = ap.parse_args()
     if not 1 <= a.ranks <= 64 or not 1 <= a.interval <= 100000 or not 0 < a.restart <= 1.0:
         ap.error("--ranks 1..64, --interval 1..100000, --restart in (0, 1] s")
-    if not 0 < a.every <= 1.0 or not 1 <= a.bins <= 100:
-        ap.error("--every in (0, 1] s, --bins 1..100")
+    if not 0 < a.every <= 1.0 or not 1 <= a.bins <= 100 or (a.max_time is not None and not 0 < a.max_time <= 10.0):
+        ap.error("--every in (0, 1] s, --bins 1..100, --max-time in (0, 10] s")
     runs = a.runs or Path("runs") / f"sheet-effect-{a.point}-{a.section}"
     if runs.is_absolute():
-        ap.error("--runs: give a folder relative to the repository")
-    paths = scenes(a.point, a.section, a.ranks, a.restart, a.interval, runs)
+        ap.error("--runs: give a folder relative to the working directory")
+    paths = scenes(a.campaign, a.point, a.section, a.ranks, a.restart, a.interval, a.max_time, runs)
     if not a.compare:
         run(paths, a.resume)
     dt = load_scene(paths["one_way"]).laydown.timestep_s  # type: ignore[union-attr]
     res = compare(paths, a.every, a.bins, dt)
     res.update({"point": a.point, "section": a.section, "ranks": a.ranks, "interval": a.interval,
-                "scenes": {n: str(p.relative_to(ROOT)) for n, p in paths.items()}, "machine": machine_info()})
+                "command": " ".join(sys.argv[1:]), "scenes": {n: str(p) for n, p in paths.items()},
+                "code": {"fiberform": package_version(), "git_revision": git_revision(),
+                         "build_revision": build_revision(build_dir()), "campaign_sha256": file_hash(a.campaign)},
+                "machine": machine_info()})
     print_table(res)
     out = a.out or HERE / "results" / f"sheet_effect_{a.point}_{a.section}.json"
     atomic_write_text(out, json.dumps(res, indent=1) + "\n")

@@ -1,0 +1,67 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""bench/coupling/run_sheet_effect.py (issue 13, "Effect on the sheet") end to end on the tiny
+campaign of tests/test_campaign.py (1 x 1 mm fabric, 2.2 ug of fibers): its point A laid down
+one-way and two-way for 1 ms from the same fibers, compared every 0.5 ms.
+
+- the one-way drainage is the flow stage's superficial velocity (the frozen flow), read
+  independently from flow.h5;
+- the coupled fluid starts from the flow stage's steady solution and 2.2 ug of fibers that have
+  not reached the fabric barely resist it: its drainage stays within 2 % of the bare fabric's;
+- the same fiber lies in both runs within a few micrometres after 0.5 ms (the reaction changes the
+  flow by about 1 %; a mix-up of fiber IDs between the runs would give hundreds of micrometres);
+- two runs that generated different fibers are refused (not a controlled comparison).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import pytest
+
+from fiberform.products import read_superficial_velocity
+
+from test_campaign import write_tiny_campaign
+
+pytestmark = pytest.mark.system
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "bench" / "coupling" / "run_sheet_effect.py"
+
+
+def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Path) -> None:
+    camp = write_tiny_campaign(tmp_path)
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "FIBERFORM_BUILD": str(fiberdem_build)}
+    out = tmp_path / "effect.json"
+    cmd = [sys.executable, str(SCRIPT), "--campaign", str(camp / "campaign.yaml"), "--point", "A",
+           "--max-time", "1e-3", "--restart", "5e-4", "--interval", "20", "--every", "5e-4",
+           "--runs", "runs/se", "--out", str(out)]
+    proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    res = json.loads(out.read_text())
+    rows = res["rows"]
+    assert [round(r["time_s"] * 1e4) for r in rows] == [5, 10]
+    u_s = read_superficial_velocity(tmp_path / "runs/se/one_way/flow/flow.h5")
+    with h5py.File(tmp_path / "runs/se/one_way/fibers/fibers.h5", "r") as f:
+        generated = len(f["fibers/mass"])
+    for r in rows:
+        assert r["drainage_one_way_m_s"] == u_s
+        assert abs(r["drainage_two_way_m_s"] / u_s - 1.0) < 0.02, r
+        assert 0 < r["one_way_fibers"] <= generated and 0 < r["two_way_fibers"] <= generated
+        assert 0.0 < r["one_way_mass_fraction"] <= 1.0
+        assert r["one_way_fines_fraction"] is None  # the tiny campaign has no fines
+    assert rows[0]["com_apart_90_m"] < 5e-6, rows[0]
+    assert res["code"]["git_revision"] and res["scenes"]["two_way"] == "runs/se/two_way.yaml"
+
+    # another seed's fibers in the two-way run: not a controlled comparison, refused
+    with h5py.File(tmp_path / "runs/se/two_way/fibers/fibers.h5", "r+") as f:
+        f["fibers/x"][0, 0] += 1e-6
+    again = subprocess.run([*cmd[:-2], "--out", str(tmp_path / "again.json"), "--compare"], cwd=tmp_path, env=env,
+                           capture_output=True, text=True, timeout=600)
+    assert again.returncode != 0 and "different fibers" in again.stderr, again.stderr[-2000:]
+    assert not (tmp_path / "again.json").exists()
