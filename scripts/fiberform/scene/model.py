@@ -123,20 +123,21 @@ class Scene(_Section):
                 raise scene_problem(f"fibers.{own}", f"required unless fiber_generation.{gen} is given ({what})")
         return self
 
-    def longest_fiber_m(self) -> float | None:
-        """The longest fiber the generate stage can make, m: fibers.length_m, or the upper end of
-        the support of fiber_generation.length_m (and fines_length_m); None without fibers, inf for
-        an untruncated or data distribution."""
+    def longest_fiber_m(self) -> tuple[float, str] | None:
+        """The longest fiber the generate stage can make, m, and the field that sets it:
+        fibers.length_m, or the upper end of the support of fiber_generation.length_m (or of
+        fines_length_m, if longer; inf for an untruncated or data distribution); None without
+        fibers."""
         f, g = self.fibers, self.fiber_generation
         if f is None:
             return None
         if f.length_m is not None:
-            longest = f.length_m
+            longest = (f.length_m, "fibers.length_m")
         else:
             assert g is not None and g.length_m is not None  # _check_fiber_shape_fields
-            longest = g.length_m.support()[1]
+            longest = (g.length_m.support()[1], "fiber_generation.length_m")
         if g is not None and g.fines_fraction > 0 and g.fines_length_m is not None:
-            longest = max(longest, g.fines_length_m.support()[1])
+            longest = max(longest, (g.fines_length_m.support()[1], "fiber_generation.fines_length_m"))
         return longest
 
     @model_validator(mode="after")
@@ -173,13 +174,10 @@ class Scene(_Section):
                                         f"(fabric.{('size_x_m', 'size_y_m')[axis]})", dom.hi_m[axis])
         period = min(fab.size_x_m, fab.size_y_m)
         longest = self.longest_fiber_m()
-        if longest is not None and longest >= period:
-            field = ("fibers.length_m" if self.fibers is not None and self.fibers.length_m is not None
-                     else "fiber_generation.length_m")
-            raise scene_problem(field, "laydown.walls periodic needs fibers shorter than the periodic box "
+        if longest is not None and longest[0] >= period:
+            raise scene_problem(longest[1], "laydown.walls periodic needs fibers shorter than the periodic box "
                                 f"({period!r} m, the smaller fabric size): the yarns are tiled over one "
-                                "periodic image on each side; a sampled length (and fines length) needs a "
-                                "max below it", longest)
+                                "periodic image on each side; a sampled length needs a max below it", longest[0])
         return self
 
     @property
