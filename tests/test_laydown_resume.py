@@ -124,6 +124,48 @@ def test_killed_laydown_resumes_to_the_same_sheet(reference: tuple[Path, Path], 
     assert np.array_equal(x, x_ref), np.abs(x - x_ref).max()
 
 
+def test_a_laydown_goes_on_with_another_max_time(reference: tuple[Path, Path], build_dir: Path,
+                                                fiberform_cmd: list[str]) -> None:
+    """A lay-down that ended at its max_time_s (3 ms, not settled) goes on from its own restart
+    files when max_time_s is raised to 6 ms and --resume is given (the restart identity leaves the
+    end time out): it resumes from a restart file of the first run, not from step 0, and ends with
+    the sheet of the uninterrupted 6 ms run, to the bit; a plain rerun with the new end time
+    refuses to discard those restart files (exit 2). Lowered again to 2 ms, --resume ends it from
+    the restart file before the new end (the one at the end itself would leave nothing to run)."""
+    work, _ = reference
+    ref = work / "reference.h5"
+    if not ref.is_file():
+        shutil.copyfile(work / "runs/a/laydown/laydown.h5", ref)
+    x_ref, id_ref = _sheet(ref)
+    for stage in ("fibers", "fabric", "flow"):  # the same upstream products (their hashes match)
+        shutil.copytree(work / "runs/a" / stage, work / "runs/c" / stage)
+    scene = work / "c.yaml"
+
+    def lay(max_time_s: float, *options: str) -> subprocess.CompletedProcess[str]:
+        scene.write_text(tiny_laydown_scene("resume_laydown", "c", 1, max_time_s))
+        return subprocess.run([*fiberform_cmd, "laydown", scene.name, *options, "--build-dir", str(build_dir)],
+                              cwd=work, capture_output=True, text=True, errors="replace", timeout=900)
+
+    def ran(h5: Path) -> tuple[int, int]:
+        with h5py.File(h5, "r") as h:
+            return int(h["run"].attrs["resumed_from_step"]), int(h["snapshots/step"][-1])
+
+    first = lay(0.003)
+    assert first.returncode == 0, first.stdout[-2000:] + first.stderr[-3000:]
+    product = work / "runs/c/laydown/laydown.h5"
+    assert ran(product) == (-1, 3000)
+    plain = lay(0.006)
+    assert plain.returncode == 2 and "--resume` continues it" in plain.stderr, plain.stderr[-2000:]
+    longer = lay(0.006, "--resume")
+    assert longer.returncode == 0, longer.stdout[-2000:] + longer.stderr[-3000:]
+    assert ran(product) == (2000, 6000)  # the last restart file with a snapshot after it
+    x, ids = _sheet(product)
+    assert np.array_equal(ids, id_ref) and np.array_equal(x, x_ref), np.abs(x - x_ref).max()
+    shorter = lay(0.002, "--resume")
+    assert shorter.returncode == 0, shorter.stdout[-2000:] + shorter.stderr[-3000:]
+    assert ran(product) == (1000, 2000)
+
+
 def test_two_ranks_lay_down_the_same_sheet(reference: tuple[Path, Path], build_dir: Path,
                                            fiberform_cmd: list[str]) -> None:
     if (os.cpu_count() or 1) < 2:

@@ -32,7 +32,7 @@ __all__ = [
     "EARLIER_LOG", "EARLIER_WALL", "PREPARED_STEP", "RESTART_EXT", "RESUME_STATE", "cut_back",
     "dump_snapshots", "dump_steps", "earlier_wall", "prepared_step", "read_text_if", "record_earlier_wall",
     "record_prepared", "recorded_inputs", "refuse_to_discard", "restart_interval_steps", "restart_name", "restart_steps",
-    "resume_point", "run_log", "run_log_parts", "start_fresh", "start_over",
+    "resume_point", "run_log", "run_log_parts", "same_run", "start_fresh", "start_over",
 ]
 
 RESTART_EXT = "restart"
@@ -115,14 +115,23 @@ def recorded_inputs(work: Path) -> Any:
         return None
 
 
-def refuse_to_discard(work: Path, stem: str, hashes: Mapping[str, str], command: str) -> None:
+def same_run(work: Path, hashes: Mapping[str, str], legacy: Mapping[str, str] | None = None) -> bool:
+    """The working folder's restart files belong to a run of these inputs: RESUME_STATE equals
+    ``hashes`` (the stage's restart identity, :meth:`fiberform.stages.Stage.restart_identity`) or,
+    for a folder written before that identity existed, ``legacy`` (the full input hashes)."""
+    old = recorded_inputs(work)
+    return old is not None and (old == dict(hashes) or (legacy is not None and old == dict(legacy)))
+
+
+def refuse_to_discard(work: Path, stem: str, hashes: Mapping[str, str], command: str,
+                      legacy: Mapping[str, str] | None = None) -> None:
     """Before a run that would start over (neither ``--resume`` nor ``--force``): ConfigError (exit
     status 2, nothing removed) when the working folder holds restart files of a killed run of the
-    same inputs (RESUME_STATE equals ``hashes``): a plain rerun must not delete hours of work.
-    Restart files of other inputs cannot be resumed and go as before. ``command``: how the stage
-    is called (``fiberform laydown SCENE``), for the message."""
+    same inputs (:func:`same_run`): a plain rerun must not delete hours of work. Restart files of
+    other inputs cannot be resumed and go as before. ``command``: how the stage is called
+    (``fiberform laydown SCENE``), for the message."""
     steps = restart_steps(work, stem) if work.is_dir() else []
-    if steps and recorded_inputs(work) == dict(hashes):
+    if steps and same_run(work, hashes, legacy):
         raise ConfigError(f"{work} holds restart files to step {steps[-1]} of a killed run of these inputs: "
                           f"`{command} --resume` continues it, `{command} --force` starts over and removes them")
 
@@ -166,17 +175,17 @@ def prepared_step(work: Path) -> int | None:
 
 
 def resume_point(work: Path, hashes: Mapping[str, str], stem: str, traj: str,
-                 usable: Callable[[int], bool] = lambda step: True) -> int | None:
+                 usable: Callable[[int], bool] = lambda step: True,
+                 legacy: Mapping[str, str] | None = None) -> int | None:
     """The step to resume a killed run from: the last restart file ``<stem>.<step>.restart`` that
-    is certainly complete and ``usable``, if the working folder belongs to the same inputs; None:
-    nothing to resume (start over). Complete: the run wrote a snapshot (dump ``traj``) after it, or
-    an earlier resume started from it (PREPARED_STEP; a resumed run killed before its first new
-    snapshot must not lose that restart file). Raises StageError when the folder holds another
-    run's files."""
-    old = recorded_inputs(work)
-    if old is None:
+    is certainly complete and ``usable``, if the working folder belongs to the same inputs
+    (:func:`same_run`); None: nothing to resume (start over). Complete: the run wrote a snapshot
+    (dump ``traj``) after it, or an earlier resume started from it (PREPARED_STEP; a resumed run
+    killed before its first new snapshot must not lose that restart file). Raises StageError when
+    the folder holds another run's files."""
+    if recorded_inputs(work) is None:
         return None
-    if old != dict(hashes):
+    if not same_run(work, hashes, legacy):
         raise StageError(f"{work}: the restart files belong to other inputs (scene, upstream "
                          "products or fiberdem changed); run without --resume to start over")
     done = max(dump_steps(work / traj), default=-1)

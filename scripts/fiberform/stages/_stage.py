@@ -181,8 +181,14 @@ class Stage(abc.ABC):
         same inputs: ConfigError (fiberform.liggghts_restart.refuse_to_discard)."""
         if self.restart_stem is None or ctx.force or ctx.options.get("resume"):
             return
-        refuse_to_discard(self.stage_dir(ctx) / "work", self.restart_stem, hashes,
-                          f"fiberform {self.name} {ctx.scene_path}")
+        refuse_to_discard(self.stage_dir(ctx) / "work", self.restart_stem, self.restart_identity(ctx, hashes),
+                          f"fiberform {self.name} {ctx.scene_path}", legacy=hashes)
+
+    def restart_identity(self, ctx: StageContext, hashes: Mapping[str, str]) -> dict[str, str]:
+        """The inputs a run's restart files belong to (recorded in its working folder, compared on
+        ``--resume``): the input hashes ``hashes``, less what may change between a run and its
+        continuation (the lay-down: its end time). The products' hashes stay ``hashes``."""
+        return dict(hashes)
 
     def check_launch(self, ctx: StageContext) -> None:
         """A local run (:meth:`execute`): the stage's program lines can be launched here, their MPI

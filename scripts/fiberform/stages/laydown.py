@@ -70,7 +70,7 @@ from ..products import (
 from ..provenance import atomic_write_text, file_hash, report_origin, write_dataset
 from .._versions import pstream_dir
 from ..runner import liggghts_progress, mpmd_command
-from ..scene import FluidSection, Scene
+from ..scene import FluidSection, Scene, section_hash
 from ._stage import Outcome, Program, Stage, StageContext
 
 __all__ = ["Laydown", "build_input", "sheet_thickness"]
@@ -344,11 +344,15 @@ class Laydown(Stage):
         scene = ctx.scene
         paths = self.needs(ctx)
         work = self.stage_dir(ctx) / "work"
-        usable = ((lambda step: fluid_state(work, scene, step) is not None) if two_way(scene)
-                  else (lambda step: True))  # fmt: skip
-        resume_step = resume_point(work, hashes, usable) if ctx.options.get("resume") else None
+        end = math.prod(run_lengths(scene))  # a shortened lay-down resumes from before its new end
+
+        def usable(step: int) -> bool:
+            return step < end and (not two_way(scene) or fluid_state(work, scene, step) is not None)
+
+        ident = self.restart_identity(ctx, hashes)
+        resume_step = resume_point(work, ident, usable, legacy=hashes) if ctx.options.get("resume") else None
         if resume_step is None:
-            start_over(work, RESTART_STEM, hashes, "fiberform laydown", bool(ctx.options.get("resume")))
+            start_over(work, RESTART_STEM, ident, "fiberform laydown", bool(ctx.options.get("resume")))
             for key, name in (("fibers_data", "fibers.data"), ("fibers_nodes", "fibers.nodes"),
                               ("flow_grid", "flow.grid")):
                 shutil.copyfile(paths[key], work / name)
@@ -364,6 +368,15 @@ class Laydown(Stage):
         elif two_way(scene):
             resume_fluid(work, scene, int(resume_step))
         record_prepared(work, resume_step)
+
+    def restart_identity(self, ctx: StageContext, hashes: Mapping[str, str]) -> dict[str, str]:
+        """The input hashes with ``laydown.max_time_s`` left out of the scene's: restart files
+        carry on when only the end time changed (``--resume`` continues a lay-down that did not
+        settle with a larger max_time_s, or ends one earlier with a smaller one)."""
+        ld = ctx.scene.laydown
+        assert ld is not None
+        neutral = ctx.scene.model_copy(update={"laydown": ld.model_copy(update={"max_time_s": 0.0})})
+        return {**hashes, "scene": section_hash(neutral, self.uses)}
 
     def resume_info(self, ctx: StageContext) -> str:
         steps = restart_steps(self.stage_dir(ctx) / "work")
@@ -675,10 +688,11 @@ def restart_steps(work: Path) -> list[int]:
 
 
 def resume_point(work: Path, hashes: Mapping[str, str],
-                 usable: Callable[[int], bool] = lambda step: True) -> int | None:
+                 usable: Callable[[int], bool] = lambda step: True,
+                 legacy: Mapping[str, str] | None = None) -> int | None:
     """The step to resume a killed lay-down from (:func:`fiberform.liggghts_restart.resume_point`;
-    ``usable``: two_way, the fluid's state of that step exists)."""
-    return liggghts_restart.resume_point(work, hashes, RESTART_STEM, TRAJ_NAME, usable)
+    ``usable``: before the end step, and two_way: the fluid's state of that step exists)."""
+    return liggghts_restart.resume_point(work, hashes, RESTART_STEM, TRAJ_NAME, usable, legacy)
 
 
 def prepare_resume(work: Path, step: int, generated_nodes: Path | None = None) -> None:
