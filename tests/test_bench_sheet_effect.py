@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """bench/coupling/run_sheet_effect.py (issue 13, "Effect on the sheet") end to end on the tiny
 campaign of tests/test_campaign.py (1 x 1 mm fabric, 2.2 ug of fibers): its point A laid down
-one-way and two-way for 1 ms from the same fibers, compared every 0.5 ms.
+one-way and two-way for 1 ms from the same fibers, compared every 0.5 ms, and the air
+permeability of both sheets.
 
 - the one-way drainage is the flow stage's superficial velocity (the frozen flow), read
   independently from flow.h5;
@@ -9,6 +10,8 @@ one-way and two-way for 1 ms from the same fibers, compared every 0.5 ms.
   not reached the fabric barely resist it: its drainage stays within 2 % of the bare fabric's;
 - the same fiber lies in both runs within a few micrometres after 0.5 ms (the reaction changes the
   flow by about 1 %; a mix-up of fiber IDs between the runs would give hundreds of micrometres);
+- the lay-down products' thickness above the fabric (laydown.h5) equals the last snapshot's
+  (the dump, the comparison's own reading), and both sheets have a converged permeability;
 - two runs that generated different fibers are refused (not a controlled comparison).
 """
 
@@ -40,7 +43,7 @@ def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Pat
     out = tmp_path / "effect.json"
     cmd = [sys.executable, str(SCRIPT), "--campaign", str(camp / "campaign.yaml"), "--point", "A",
            "--max-time", "1e-3", "--restart", "5e-4", "--interval", "20", "--every", "5e-4",
-           "--runs", "runs/se", "--out", str(out)]
+           "--runs", "runs/se", "--to", "permeability", "--out", str(out)]
     proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     res = json.loads(out.read_text())
@@ -56,12 +59,20 @@ def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Pat
         assert 0.0 < r["one_way_mass_fraction"] <= 1.0
         assert r["one_way_fines_fraction"] is None  # the tiny campaign has no fines
     assert rows[0]["com_apart_90_m"] < 5e-6, rows[0]
+    # the finished products: the lay-down's own thickness (from laydown.h5's sheet) is the last
+    # snapshot's (from the dump); the permeability ran on both sheets
+    for name in ("one_way", "two_way"):
+        got = res["products"][name]
+        assert got["laydown_simulated_time_s"] == pytest.approx(1e-3)
+        assert got["sheet_thickness_above_fabric_m"] == pytest.approx(rows[-1][f"{name}_thickness_above_fabric_m"],
+                                                                      rel=1e-9)
+        assert got["permeability_cfm"] > 0.0 and got["permeability_converged"] == 1.0
     assert res["code"]["git_revision"] and res["scenes"]["two_way"] == "runs/se/two_way.yaml"
 
     # another seed's fibers in the two-way run: not a controlled comparison, refused
     with h5py.File(tmp_path / "runs/se/two_way/fibers/fibers.h5", "r+") as f:
         f["fibers/x"][0, 0] += 1e-6
-    again = subprocess.run([*cmd[:-2], "--out", str(tmp_path / "again.json"), "--compare"], cwd=tmp_path, env=env,
+    again = subprocess.run([*cmd[:-4], "--out", str(tmp_path / "again.json"), "--compare"], cwd=tmp_path, env=env,
                            capture_output=True, text=True, timeout=600)
     assert again.returncode != 0 and "different fibers" in again.stderr, again.stderr[-2000:]
     assert not (tmp_path / "again.json").exists()

@@ -14,6 +14,11 @@ flow) and ``{mode: two_way, interval: N, fluid_ranks: 1}``. The fabric and flow 
 (one-way: ranks processes; two-way: ranks + 1), each logging to ``<runs>/<name>.log``; with
 ``--resume`` they continue from their restart files.
 
+``--to permeability`` runs the permeability stage on both finished sheets as well (air, the
+campaign scene's settings); ``--max-time`` with ``--resume`` ends both lay-downs at a common time
+from their restart files (the restart identity leaves the end time out: docs/stages/laydown.md,
+"Resuming"), so that both have products (a lay-down that did not settle has none until it ends).
+
 ``--compare`` reads the two lay-downs' snapshots (``laydown/work/traj.dump``; a finished,
 still running or killed run) at the common times every ``--every`` s up to the last snapshot
 both have, and tabulates for each: fibers present and the mass, and the fines, still in the
@@ -24,7 +29,9 @@ over the piece: RMS and largest difference over the mean) and of the mass profil
 thickness (10 um slabs: largest difference over the largest slab), how far the same fibers lie
 apart (centre of mass: median and 90 %), and the drainage (superficial velocity through fabric +
 sheet: the two-way fluid's bottom flow rate at that time; one-way: the flow stage's bare fabric).
-Written to ``bench/coupling/results/sheet_effect_<point>_<section>.json`` (``--out``).
+Where the runs have finished products, their lay-down metrics (thickness above the fabric,
+grammage, simulated time) and, with ``--to permeability``, their air permeabilities (CFM) are
+added. Written to ``bench/coupling/results/sheet_effect_<point>_<section>.json`` (``--out``).
 
     .venv/bin/python bench/coupling/run_sheet_effect.py                 # both lay-downs (hours)
     .venv/bin/python bench/coupling/run_sheet_effect.py --resume        # continue killed ones
@@ -54,6 +61,7 @@ from fiberform.openfoam_case import DRAINAGE_FO, read_patch_history
 from fiberform.products import FABRIC_H5, FIBERS_H5, read_superficial_velocity, read_yarns
 from fiberform.provenance import atomic_write_text, file_hash, machine_info
 from fiberform.scene import Scene, load_scene
+from fiberform.stages import STAGES, StageContext
 from fiberform.stages.laydown import FLUID_CASE, settle_speed
 
 HERE = Path(__file__).resolve().parent
@@ -94,7 +102,7 @@ def build_dir() -> Path:
     return Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
 
 
-def run(paths: dict[str, Path], resume: bool) -> None:
+def run(paths: dict[str, Path], resume: bool, to: str) -> None:
     cmd = [sys.executable, "-m", "fiberform", "run", "--build-dir", str(build_dir())]
     if subprocess.run([*cmd, str(paths["one_way"]), "--to", "flow"]).returncode != 0:
         raise SystemExit("the one-way scene's fabric and flow stages failed")
@@ -105,7 +113,7 @@ def run(paths: dict[str, Path], resume: bool) -> None:
     procs = []
     for name in NAMES:
         log = (paths[name].parent / f"{name}.log").open("a")
-        procs.append(subprocess.Popen([*cmd, str(paths[name]), "--to", "laydown", *(["--resume"] if resume else [])],
+        procs.append(subprocess.Popen([*cmd, str(paths[name]), "--to", to, *(["--resume"] if resume else [])],
                                       stdout=log, stderr=subprocess.STDOUT))
     codes = [p.wait() for p in procs]
     if any(codes):
@@ -186,7 +194,19 @@ def compare(paths: dict[str, Path], every: float, bins: int, dt: float) -> dict[
             "drainage_two_way_m_s": float(q[k] / area) if k >= 0 else float("nan"),
         })
     return {"settle_speed_m_s": v_settle, "fabric_top_m": top, "bins": bins, "rows": rows,
-            "last_snapshot_s": {n: max(frames[n]) * dt if frames[n] else 0.0 for n in NAMES}}
+            "last_snapshot_s": {n: max(frames[n]) * dt if frames[n] else 0.0 for n in NAMES},
+            "products": {n: products(paths[n], sc[n]) for n in NAMES}}
+
+
+def products(scene_path: Path, scene: Scene) -> dict[str, float]:
+    """The metrics of the finished lay-down and permeability products of a run (empty without)."""
+    ctx = StageContext(scene=scene, scene_path=scene_path, build_dir=build_dir())
+    out: dict[str, float] = {}
+    for name in ("laydown", "permeability"):
+        st = STAGES[name]
+        if all(p.is_file() for p in st.product_paths(ctx)):
+            out.update(st.metrics(ctx))
+    return out
 
 
 def _share(value: float | None) -> str:
@@ -223,6 +243,8 @@ def main() -> int:
     ap.add_argument("--runs", type=Path, default=None,
                     help="run folder relative to the working directory (default runs/sheet-effect-POINT-SECTION)")
     ap.add_argument("--resume", action="store_true", help="continue killed lay-downs from their restart files")
+    ap.add_argument("--to", choices=("laydown", "permeability"), default="laydown",
+                    help="the last stage to run (default laydown)")
     ap.add_argument("--compare", action="store_true", help="run nothing: compare what the runs have")
     ap.add_argument("--every", type=float, default=2e-3, help="--compare: time between rows, s (default 2e-3)")
     ap.add_argument("--bins", type=int, default=6, help="--compare: grammage map cells per side (default 6)")
@@ -237,7 +259,7 @@ def main() -> int:
         ap.error("--runs: give a folder relative to the working directory")
     paths = scenes(a.campaign, a.point, a.section, a.ranks, a.restart, a.interval, a.max_time, runs)
     if not a.compare:
-        run(paths, a.resume)
+        run(paths, a.resume, a.to)
     dt = load_scene(paths["one_way"]).laydown.timestep_s  # type: ignore[union-attr]
     res = compare(paths, a.every, a.bins, dt)
     res.update({"point": a.point, "section": a.section, "ranks": a.ranks, "interval": a.interval,
@@ -246,6 +268,9 @@ def main() -> int:
                          "build_revision": build_revision(build_dir()), "campaign_sha256": file_hash(a.campaign)},
                 "machine": machine_info()})
     print_table(res)
+    for name, got in res["products"].items():
+        if got:
+            print(f"{name}: " + ", ".join(f"{k} {v:.6g}" for k, v in got.items()))
     out = a.out or HERE / "results" / f"sheet_effect_{a.point}_{a.section}.json"
     atomic_write_text(out, json.dumps(res, indent=1) + "\n")
     print(f"wrote {out}")
