@@ -1,6 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 #include "fix_wall_fiber_dlvo.h"
 
+#include "style_args.h"
+
 #include <mpi.h>
 
 #include <cmath>
