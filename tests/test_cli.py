@@ -132,7 +132,10 @@ def test_no_command_is_usage_error(fiberform_cmd: list[str]) -> None:
 def test_schema_prints_the_field_table(fiberform_cmd: list[str]) -> None:
     proc = _cli(fiberform_cmd, "schema")
     assert proc.returncode == 0
-    assert "| `fibers.length_m` | Fiber length | m | required | 0 < x <= 0.1 |" in proc.stdout
+    assert ("| `fibers.width_m` | Fiber width (the diameter for a circular cross-section) | m | required | "
+            "0 < x <= 0.001 |") in proc.stdout
+    assert ("| `fibers.length_m` | Fiber length (required unless fiber_generation.length_m samples it; not both) "
+            "| m | absent | 0 < x <= 0.1 |") in proc.stdout
     proc = _cli(fiberform_cmd, "schema", "--json")
     assert proc.returncode == 0 and '"additionalProperties": false' in proc.stdout
 
