@@ -120,15 +120,14 @@ def run(paths: dict[str, Path], resume: bool, to: str) -> None:
         raise SystemExit(f"lay-downs ended with {codes} (logs beside the scenes)")
 
 
-def frame_measures(scene: Scene, fr: Frame, fibers_h5: Path, top: float, bins: int, v_settle: float
-                   ) -> dict[str, Any]:
-    """What :func:`compare` tabulates of one snapshot (arrays kept for the differences)."""
+def frame_measures(scene: Scene, fr: Frame, mass: np.ndarray, fine: np.ndarray, top: float, bins: int,
+                   v_settle: float) -> dict[str, Any]:
+    """What :func:`compare` tabulates of one snapshot (arrays kept for the differences); ``mass``,
+    ``fine``: the generated fibers' masses (kg) and fines flags (fibers.h5)."""
     fab = scene.fabric
     assert fab is not None
     sx, sy = fab.size_x_m, fab.size_y_m
     x, present, offsets = frame_fibers(fr.columns)
-    with h5py.File(fibers_h5, "r") as f:
-        mass, fine = f["fibers/mass"][...], f["fibers/is_fine"][...].astype(bool)
     counts = np.diff(offsets)
     m_node = np.repeat(mass[present] / counts, counts)
     gmap, _, _ = np.histogram2d(x[:, 0], x[:, 1], weights=m_node,
@@ -155,6 +154,7 @@ def compare(paths: dict[str, Path], every: float, bins: int, dt: float) -> dict[
     with h5py.File(out["one_way"] / FIBERS_H5, "r") as a, h5py.File(out["two_way"] / FIBERS_H5, "r") as b:
         if not np.array_equal(a["fibers/x"][...], b["fibers/x"][...]):
             raise SystemExit("the two runs generated different fibers: not a controlled comparison")
+        mass, fine = a["fibers/mass"][...], a["fibers/is_fine"][...].astype(bool)  # the same in both
     top = read_yarns(out["one_way"] / FABRIC_H5).top
     u_s = read_superficial_velocity(out["one_way"] / "flow" / "flow.h5")
     v_settle = settle_speed(sc["one_way"], u_s)
@@ -170,7 +170,7 @@ def compare(paths: dict[str, Path], every: float, bins: int, dt: float) -> dict[
     area = fab.size_x_m * fab.size_y_m
     rows = []
     for s in steps:
-        a, b = (frame_measures(sc[n], frames[n][s], out[n] / FIBERS_H5, top, bins, v_settle) for n in NAMES)
+        a, b = (frame_measures(sc[n], frames[n][s], mass, fine, top, bins, v_settle) for n in NAMES)
         mean = float(np.mean(a["map"]))
         dmap = b["map"] - a["map"]
         zmax = max(a["z"].max(), b["z"].max())

@@ -151,7 +151,7 @@ def start_over(work: Path, stem: str, hashes: Mapping[str, str], command: str, r
         if resume_asked:
             why = f"none of them is certainly complete ({why_not})"
         else:
-            why = "--force starts over" if recorded_inputs(work) == dict(hashes) else "they are of other inputs"
+            why = "--force starts over" if same_run(work, hashes) else "they are of other inputs"
         print(f"{command}: starting over: the restart files of an earlier run in {work} (steps "
               f"{earlier[0]}-{earlier[-1]}) are removed; {why}", file=sys.stderr)
     if work.exists():
