@@ -12,7 +12,11 @@ permeability of both sheets.
   flow by about 1 %; a mix-up of fiber IDs between the runs would give hundreds of micrometres);
 - the lay-down products' thickness above the fabric (laydown.h5) equals the last snapshot's
   (the dump, the comparison's own reading), and both sheets have a converged permeability;
-- two runs that generated different fibers are refused (not a controlled comparison).
+- two runs that generated different fibers are refused (not a controlled comparison);
+- the ``soft`` variant against the first run's results JSON as its reference (not laid down
+  again): its scene has the reference's moduli over 3 and nothing else changed, it generates the
+  same fibers, the reference columns are the JSON's, and its product's thickness is its last
+  snapshot's.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from pathlib import Path
 
 import h5py
 import pytest
+import yaml
 
 from fiberform.products import read_superficial_velocity
 
@@ -76,3 +81,32 @@ def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Pat
                            capture_output=True, text=True, timeout=600)
     assert again.returncode != 0 and "different fibers" in again.stderr, again.stderr[-2000:]
     assert not (tmp_path / "again.json").exists()
+
+    # the soft variant against the results JSON above as its reference
+    soft_out = tmp_path / "soft.json"
+    soft = subprocess.run([*cmd[:-4], "--to", "laydown", "--variants", "soft", "--reference-json", str(out),
+                           "--out", str(soft_out)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=1200)
+    assert soft.returncode == 0, soft.stdout[-3000:] + soft.stderr[-3000:]
+    ref_scene = yaml.safe_load((tmp_path / "runs/se/one_way.yaml").read_text())
+    soft_scene = yaml.safe_load((tmp_path / "runs/se/soft.yaml").read_text())
+    for key in ("youngs_modulus_Pa", "shear_modulus_Pa"):
+        assert soft_scene["fibers"][key] == pytest.approx(ref_scene["fibers"].pop(key) / 3.0, rel=1e-12)
+        soft_scene["fibers"].pop(key)
+    for key in ("name", "output_dir"):
+        ref_scene.pop(key), soft_scene.pop(key)
+    assert soft_scene == ref_scene  # nothing else changed
+    with h5py.File(tmp_path / "runs/se/one_way/fibers/fibers.h5", "r") as a, \
+            h5py.File(tmp_path / "runs/se/soft/fibers/fibers.h5", "r") as b:
+        assert (a["fibers/x"][...] == b["fibers/x"][...]).all()
+    got = json.loads(soft_out.read_text())
+    assert got["names"] == ["one_way", "soft"] and got["reference_from"] == str(out)
+    assert [r["time_s"] for r in got["rows"]] == [r["time_s"] for r in rows]
+    for mine, theirs in zip(got["rows"], rows):
+        assert mine["one_way_thickness_above_fabric_m"] == theirs["one_way_thickness_above_fabric_m"]
+        assert mine["one_way_fibers"] == theirs["one_way_fibers"]
+        assert mine["grammage_map_rms_diff_rel"] is None and mine["com_apart_90_m"] is None
+        assert mine["drainage_soft_m_s"] == u_s
+    assert got["products"]["one_way"] == res["products"]["one_way"]
+    assert got["products"]["soft"]["sheet_thickness_above_fabric_m"] == pytest.approx(
+        got["rows"][-1]["soft_thickness_above_fabric_m"], rel=1e-9)
