@@ -60,8 +60,9 @@ def _summary(scene: Scene, source: str) -> list[str]:
         )
         g = scene.fiber_generation
         length = (f"{f.length_m:g} m long" if f.length_m is not None else "sampled length")
+        # the scene holds exactly one of fibers.segments, fiber_generation.element_length_m
         elements = (f"{f.segments} segments" if f.segments is not None else
-                    f"elements of {g.element_length_m:g} m" if g is not None and g.element_length_m else "")
+                    f"elements of {g.element_length_m:g} m" if g is not None else "")
         lines.append(f"  fibers      {amount}, {length}, {f.width_m:g} m wide, {elements}, {f.cross_section}")
     if scene.contact is not None:
         c = scene.contact

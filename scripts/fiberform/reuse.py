@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import json
 import shutil
-from datetime import datetime, timezone
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Literal
 
