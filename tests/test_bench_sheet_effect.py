@@ -82,6 +82,12 @@ def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Pat
     assert again.returncode != 0 and "different fibers" in again.stderr, again.stderr[-2000:]
     assert not (tmp_path / "again.json").exists()
 
+    # the reference JSON is never the output
+    clash = subprocess.run([*cmd[:-4], "--compare", "--variants", "soft", "--reference-json", str(out),
+                            "--out", str(out)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert clash.returncode == 2 and "--reference-json file" in clash.stderr, clash.stderr[-2000:]
+    assert json.loads(out.read_text()) == res
+
     # the soft variant against the results JSON above as its reference
     soft_out = tmp_path / "soft.json"
     soft = subprocess.run([*cmd[:-4], "--to", "laydown", "--variants", "soft", "--reference-json", str(out),

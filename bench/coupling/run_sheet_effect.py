@@ -44,7 +44,8 @@ sheet: the two-way fluid's bottom flow rate at that time; otherwise the flow sta
 Where the runs have finished products, their lay-down metrics (thickness above the fabric,
 grammage, simulated time) and, with ``--to permeability``, their air permeabilities (CFM) are
 added. Written to ``bench/coupling/results/sheet_effect_<point>_<section>.json`` for ``two_way``,
-``..._<variant>.json`` for the others (``--out``: one variant only).
+``..._<variant>.json`` for the others and for every variant with ``--reference-json`` (``--out``:
+one variant only; never the reference JSON itself).
 
     .venv/bin/python bench/coupling/run_sheet_effect.py                 # both lay-downs (hours)
     .venv/bin/python bench/coupling/run_sheet_effect.py --resume        # continue killed ones
@@ -358,6 +359,13 @@ def main() -> int:
                      f"{a.point} {a.section}")
         if ref_json.get("code", {}).get("campaign_sha256") != file_hash(a.campaign):
             ap.error("--reference-json: it was made from another campaign file than --campaign")
+    outs: dict[str, Path] = {}
+    for variant in a.variants:
+        # two_way against a laid-down reference keeps its session-31 name; never overwrite the reference JSON
+        suffix = "" if variant == "two_way" and ref_json is None else f"_{variant}"
+        outs[variant] = a.out or HERE / "results" / f"sheet_effect_{a.point}_{a.section}{suffix}.json"
+        if a.reference_json is not None and outs[variant].resolve() == a.reference_json.resolve():
+            ap.error(f"--out {outs[variant]}: that is the --reference-json file, which this run reads")
     paths = scenes(a.campaign, a.point, a.section, a.ranks, a.restart, a.interval, a.max_time, runs, a.variants)
     if not a.compare:
         run(paths, a.resume, a.to, with_reference=ref_json is None)
@@ -373,8 +381,7 @@ def main() -> int:
         for name, got in res["products"].items():
             if got:
                 print(f"{name}: " + ", ".join(f"{k} {v:.6g}" for k, v in got.items()))
-        suffix = "" if variant == "two_way" else f"_{variant}"
-        out = a.out or HERE / "results" / f"sheet_effect_{a.point}_{a.section}{suffix}.json"
+        out = outs[variant]
         atomic_write_text(out, json.dumps(res, indent=1) + "\n")
         print(f"wrote {out}")
     return 0
