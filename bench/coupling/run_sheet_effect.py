@@ -63,6 +63,7 @@ import os
 import shutil
 import subprocess
 import sys
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -187,6 +188,13 @@ def frame_measures(scene: Scene, fr: Frame, mass: np.ndarray, fine: np.ndarray, 
     }
 
 
+@cache
+def dump_frames(dump: Path) -> dict[int, Frame]:
+    """The snapshots of a lay-down's ``traj.dump`` by step, read once per run even when several
+    variants are compared with the same reference."""
+    return {fr.step: fr for fr in read_dump(dump)}
+
+
 MEASURES = ("fibers", "mass_fraction", "fines_fraction", "settled_grammage_kg_m2",
             "thickness_above_fabric_m", "node_height_50_90_99_m")
 
@@ -211,7 +219,7 @@ def compare(paths: dict[str, Path], variant: str, every: float, bins: int, dt: f
     u_s = read_superficial_velocity(out[REFERENCE] / "flow" / "flow.h5")
     v_settle = settle_speed(sc[REFERENCE], u_s)
     runs = names if reference is None else (variant,)
-    frames = {n: {fr.step: fr for fr in read_dump(out[n] / "laydown" / "work" / "traj.dump")} for n in runs}
+    frames = {n: dump_frames(out[n] / "laydown" / "work" / "traj.dump") for n in runs}
     if reference is None:
         ref_rows: dict[int, dict[str, Any]] = {}
         common = sorted(set(frames[REFERENCE]) & set(frames[variant]))
@@ -300,7 +308,7 @@ def _um(value: float | None) -> str:
 
 
 def print_table(res: dict[str, Any]) -> None:
-    r0, v = res.get("names", (REFERENCE, "two_way"))
+    r0, v = res["names"]
     print(f"reference {r0}, variant {v} (ref / var)")
     print("| t (ms) | fibers | fines kept | settled g/m^2 | thickness above fabric (um) | grammage map RMS / "
           "max diff | profile max diff | same fiber apart, median / 90 % (um) | drainage (mm/s) |")
