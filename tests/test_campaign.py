@@ -328,7 +328,9 @@ def test_pressure_scene_differs_from_the_point_only_in_press(
                           "hold_time_s": c.pressure_press.hold_time_s,
                           "release_time_s": c.pressure_press.release_time_s,
                           "plate_speed_m_s": pa["plate_speed_m_s"], "output_interval_s": pa["output_interval_s"],
-                          "overlap_limit": pa["overlap_limit"], "overlap_action": "stop", "ranks": pa["ranks"]}
+                          "overlap_limit": pa["overlap_limit"], "overlap_action": "stop", "ranks": pa["ranks"],
+                          "steric_cap_m": c.press.steric_cap_m}
+            assert pa["steric_cap_m"] == c.press.steric_cap_m == 1e-6  # both presses (campaign.yaml)
             # validated, and every stage before the press hashes the same scene entries
             sp, sq = parse_scene(point, "point"), parse_scene(data, "pressure")
             assert sq.press is not None and sq.press.mode == "pressure" and sq.press.overlap_action == "stop"

@@ -116,10 +116,14 @@ def _stack() -> tuple[list[Fiber], list[int]]:
     return fibs, first2
 
 
-def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict[str, np.ndarray]:
-    """Plate from G0 above layer 3 down by TRAVEL at U_PLATE (fix wall/fiber/dlvo velocity +
-    stop), held there for HOLD_STEPS, then lifted by 2 TRAVEL at U_PLATE and left there.
-    ``gravity``: Earth's gravity and buoyancy on the fibers (bench/press/run.py; the test: none)."""
+def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False, travel: float = TRAVEL,
+         h_cap: float | None = None, lift: bool = True, speed: float = U_PLATE) -> dict[str, np.ndarray]:
+    """Plate from G0 above layer 3 down by ``travel`` at ``speed`` (fix wall/fiber/dlvo velocity +
+    stop), held there for HOLD_STEPS, then lifted by 2 ``travel`` at ``speed`` and left there.
+    ``gravity``: Earth's gravity and buoyancy on the fibers (bench/press/run.py; the test: none);
+    ``h_cap``: the law's S1 saturation in every contact (the press stage's press.steric_cap_m),
+    absent: the law's H_CAP; ``lift`` False: the run ends after the hold; ``speed``: the plate's
+    (m/s)."""
     work.mkdir(parents=True, exist_ok=True)
     fibs, first2 = _stack()
     lx, ly = N2 * S, NSPAN * S
@@ -132,15 +136,16 @@ def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict
     probes = {"s0": mid + k * M, "ld": mid + k * M + M // 2, "s1": mid + (k + 1) * M,
               "top": sum(f.n for f in fibs[:NSPAN + 1 + N2]) + 1 + (NSPAN // 2) * (2 * N2 + 1) + 2 * (N2 // 2) + 1}
     clamp = " ".join(f"{f} {f + NSPAN * M}" for f in first2)
-    down = round((TRAVEL + G0) / (U_PLATE * DT))
-    up = round(2 * TRAVEL / (U_PLATE * DT))
+    down = round((travel + G0) / (speed * DT))
+    up = round(2 * travel / (speed * DT))
+    law = f"terms {terms}" + ("" if h_cap is None else f" h_cap {h_cap!r}")
 
     def plate(z: float, v: float, stop: float) -> str:
         return (f"fix plate all wall/fiber/dlvo plane {lx / 2!r} {ly / 2!r} {z!r} 0 0 -1 velocity 0 0 {v!r} "
-                f"stop {stop!r} terms {terms} implicit_force newton")
+                f"stop {stop!r} {law} implicit_force newton")
 
     thermo = ["thermo_style custom step time f_plate[9] f_plate[10] f_floor[9] f_beam[14] f_beam[16] "
-              "v_s0 v_ld v_s1 v_top", "thermo_modify format float %.15g", "thermo 5"]
+              "v_s0 v_ld v_s1 v_top f_FIBER_DLVO_STEP[6]", "thermo_modify format float %.15g", "thermo 5"]
     lines = [
         "units si", "atom_style sphere", "atom_modify map array sort 0 0.0", "boundary f f f", "newton on",
         "communicate single vel yes", "processors 1 1 1", "read_data data.fib", f"neighbor {0.1 * R!r} bin",
@@ -148,18 +153,17 @@ def _run(work: Path, build_dir: Path, terms: str, gravity: bool = False) -> dict
         f"fix beam all fiber/beam nodes nodes.fib E {E!r} G {G!r} density {RHO!r} shear_factor {KSH!r} clamp clamp",
         # water at rest (drag damps the motion after the release; gravity: see the docstring)
         "fix drag all fiber/drag flow uniform 0 0 0" + ("" if gravity else " gravity 0 0 0"),
-        f"fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms {terms} implicit_force newton",
-        plate(z_plate, -U_PLATE, TRAVEL + G0),
-        f"pair_style fiber/dlvo terms {terms} implicit_force newton", "pair_coeff * *",
+        f"fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 {law} implicit_force newton",
+        plate(z_plate, -speed, travel + G0),
+        f"pair_style fiber/dlvo {law} implicit_force newton", "pair_coeff * *",
         f"timestep {DT!r}",
         *(f"variable {n} equal z[{v}]" for n, v in probes.items()),
         *thermo, f"run {down + HOLD_STEPS}",
-        "unfix plate", plate(z_plate - TRAVEL - G0, U_PLATE, 2 * TRAVEL), *thermo,
-        f"run {up + HOLD_STEPS}",
-    ]
+    ] + (["unfix plate", plate(z_plate - travel - G0, speed, 2 * travel), *thermo,
+          f"run {up + HOLD_STEPS}"] if lift else [])
     t0 = time.time()
     out = run_fiberdem_thermo(work, build_dir, lines,
-                           ["step", "t", "fz", "disp", "floor", "newton", "splits", "s0", "ld", "s1", "top"])
+                           ["step", "t", "fz", "disp", "floor", "newton", "splits", "s0", "ld", "s1", "top", "gap"])
     out["delta"] = 0.5 * (out["s0"] + out["s1"]) - out["ld"]
     out["wall"] = np.array([time.time() - t0])
     out["hold_end"] = np.array([down + HOLD_STEPS])
@@ -196,6 +200,52 @@ def test_log_cabin_deflection_matches_continuous_beam(runs: dict[str, dict[str, 
     assert abs(delta / expected - 1) < 0.05, (
         f"deflection {delta:.4e} m vs P s^3/(192 E I) = {expected:.4e} m (P = {P:.3e} N); "
         f"compression per layer from the stack top {layers:.3e} m")
+
+
+# A press loads contacts far beyond F_MAX (docs/models/press.md section 5): the plate travels
+# TRAVEL_CAP = 6 um, which the stack's bending alone would answer with P = TRAVEL_CAP / C_BEND, about
+# 10 F_MAX per crossing. With the law's h_cap (2 nm) S1 saturates: a crossing of two nodes carries at
+# most its 4 element pairs' 4 F_MAX and the layers creep into each other. With h_cap = 1 um (the
+# press stage's press.steric_cap_m) the contact stays in S1's linear range (P C_CONTACT ~ 20 nm, far
+# below h_cap) and the stack carries the load by bending. (At 6 um, 0.6 r, the clamped span's
+# membrane force stiffens it by about 8 % against the linear closed form, so the deflection is not
+# compared with it here.) The plate moves at 4 U_PLATE, 4 nm per step: still quasi-static (the
+# spans' first bending period, about 22 us, is two steps).
+TRAVEL_CAP = 6e-6
+H_CAP_PRESS = 1e-6
+
+
+@pytest.fixture(scope="module")
+def cap_runs(fiberdem_build: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, np.ndarray]]:
+    base = tmp_path_factory.mktemp("press_cap")
+    return {str(c): _run(base / f"cap{c}", fiberdem_build, "steric", travel=TRAVEL_CAP, h_cap=c, lift=False,
+                         speed=4 * U_PLATE) for c in (None, H_CAP_PRESS)}
+
+
+def _hold(r: dict[str, np.ndarray]) -> tuple[float, float, float]:
+    """Load per crossing (N), middle-span deflection (m) over the last 100 steps of the hold, and
+    the smallest fiber-fiber surface gap over the run (m)."""
+    k = _at(r, int(r["hold_end"][0]))
+    hold = slice(k - 19, k + 1)
+    return (-float(np.mean(r["fz"][hold])) / N_CROSS, float(np.mean(r["delta"][hold])),
+            float(np.min(r["gap"][: k + 1])))
+
+
+def test_steric_cap_carries_a_press_load(cap_runs: dict[str, dict[str, np.ndarray]]) -> None:
+    """press.steric_cap_m: with h_cap = 1 um the stack carries about 10 F_MAX per crossing, the
+    fibers entering each other by no more than S1's linear compression P t_R^2/(2 mu) of one
+    element pair; with the law's 2 nm the same plate travel finds at most the 4 F_MAX of a
+    crossing's element pairs and pushes the layers into each other by far more."""
+    assert TRAVEL_CAP / C_BEND > 8 * F_MAX and TRAVEL_CAP / C_BEND * C_CONTACT < 0.05 * H_CAP_PRESS
+    p_cap, d_cap, g_cap = _hold(cap_runs[str(H_CAP_PRESS)])
+    p_law, d_law, g_law = _hold(cap_runs["None"])
+    print(f"press {TRAVEL_CAP * 1e6:.0f} um: h_cap 1 um P = {p_cap / F_MAX:.2f} F_max, deflection "
+          f"{d_cap * 1e6:.3f} um (linear closed form {p_cap * C_BEND * 1e6:.3f}), smallest gap "
+          f"{g_cap * 1e9:.1f} nm; h_cap 2 nm P = {p_law / F_MAX:.2f} F_max, deflection "
+          f"{d_law * 1e6:.3f} um, smallest gap {g_law * 1e9:.1f} nm")
+    assert p_cap > 8 * F_MAX, p_cap / F_MAX
+    assert g_cap > H_R - p_cap * C_CONTACT, (g_cap, p_cap * C_CONTACT)
+    assert p_law < 4.4 * F_MAX and g_law < 10 * (H_R - p_cap * C_CONTACT), (p_law / F_MAX, g_law)
 
 
 def _springback(r: dict[str, np.ndarray]) -> tuple[float, float, float, float]:
@@ -301,7 +351,7 @@ def _adhesion_run(work: Path, build_dir: Path, terms: str, gap: float) -> dict[s
         f"fix beam all fiber/beam nodes nodes.fib E {E!r} G {G!r} density {RHO!r} shear_factor {KSH!r} clamp clamp",
         "fix drag all fiber/drag flow uniform 0 0 0 gravity 0 0 0",
         f"fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms {terms} implicit_force newton",
-        plate(z_plate, -U_PLATE, travel + G0),
+        plate(z_plate, -speed, travel + G0),
         f"pair_style fiber/dlvo terms {terms} implicit_force newton", "pair_coeff * *",
         f"timestep {DT!r}", f"variable tip equal z[{tip}]", "variable b equal z[2]",
         *thermo, f"run {down + HOLD_STEPS}",

@@ -183,6 +183,28 @@ def test_law_parameters_reach_every_contact(key: tuple[str, str], walls: str) ->
         assert word in words and float(words[words.index(word) + 1]) == value, (word, ln)
 
 
+@pytest.mark.parametrize("walls", ["wall_fiber_dlvo", "fiber_yarns"])
+def test_press_steric_cap_reaches_every_press_contact(walls: str) -> None:
+    """press.steric_cap_m is the h_cap of every contact of the press (pair style, yarns, the four
+    side planes, the plate) and of none of the lay-down's (the lay-down keeps the law's 2 nm)."""
+    from fiberform.stages import press
+
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["laydown"].update({"walls": walls, "yarn_contact": "newton", "fiber_contact": "newton"})
+    data["laydown"].pop("contact_integrator")
+    data["contact"].pop("integrator")
+    data["press"] = {"mode": "velocity", "target_thickness_m": 20.0e-6, "steric_cap_m": 3.0e-7}
+    scene = parse_scene(data, "cap.yaml")
+    assert not any("h_cap" in ln.split() for ln in _law_lines(laydown.render_input(scene, U_S)))
+    plan = press.PressPlan(scene, sheet_top=2.677e-3, fabric_top=2.637e-3, t_min=20e-6)
+    pressed = _law_lines(press.build_input(scene, plan))
+    # pair style, yarns, four side planes and the plate (defined again at each of its phases)
+    assert len(pressed) > 6 and sum(" plate " in f" {ln} " for ln in pressed) == len(pressed) - 6, pressed
+    for ln in pressed:
+        words = ln.split()
+        assert words.count("h_cap") == 1 and float(words[words.index("h_cap") + 1]) == 3.0e-7, ln
+
+
 # ---- permeability (issue 12): every field reaches the box case, the run options or the output --
 
 PERM_ALTERNATIVES: dict[str, object] = {
@@ -248,6 +270,7 @@ PRESS_ALTERNATIVES: dict[str, tuple[str, object]] = {
     "release_time_s": ("pressure", 3.0e-3),
     "servo_band_Pa": ("pressure", 5.0),
     "overlap_limit": ("pressure", 0.3),
+    "steric_cap_m": ("pressure", 5.0e-7),
     "overlap_action": ("velocity", "stop"),
     "ranks": ("pressure", 2),
     "restart_interval_s": ("velocity", 4.0e-4),

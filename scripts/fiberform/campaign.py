@@ -75,6 +75,8 @@ class CampaignPress(_Strict):
     hold_time_s: float = Field(ge=0.0, le=10.0)
     output_interval_s: float = Field(gt=0.0, le=1.0)
     overlap_limit: float = Field(gt=0.0, le=1.0)
+    #: press.steric_cap_m of both presses (absent: the law's 2 nm)
+    steric_cap_m: float | None = Field(default=None, ge=1e-9, le=1e-4)
 
 
 class CampaignPressurePress(_Strict):
@@ -263,6 +265,8 @@ def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, o
                      "plate_speed_m_s": p.plate_speed_m_s, "hold_time_s": p.hold_time_s,
                      "output_interval_s": p.output_interval_s, "overlap_limit": p.overlap_limit,
                      "overlap_action": "stop", "ranks": data["laydown"].get("ranks", 1)}
+    if p.steric_cap_m is not None:
+        data["press"]["steric_cap_m"] = p.steric_cap_m
     parse_scene(data, f"campaign point {name}")
     return data
 
@@ -270,7 +274,7 @@ def point_scene(c: Campaign, point: Point, section: Section, thesis_dir: Path, o
 def pressure_scene(c: Campaign, point: dict[str, Any]) -> dict[str, Any]:
     """The scene of a point's second press, from the point's scene data (:func:`point_scene`):
     the same in every section but ``press`` (pressure mode at ``pressure_press``; plate speed,
-    output interval and overlap guard (stop) of ``press``; the same ranks), with ``_pressure``
+    output interval, overlap guard (stop) and steric cap of ``press``; the same ranks), with ``_pressure``
     added to the name and ``-pressure`` to the output folder. Validated (SceneError); ConfigError
     when the campaign has no ``pressure_press``."""
     pp = c.pressure_press
@@ -285,6 +289,8 @@ def pressure_scene(c: Campaign, point: dict[str, Any]) -> dict[str, Any]:
     press.update(hold_time_s=pp.hold_time_s, release_time_s=pp.release_time_s,
                  plate_speed_m_s=c.press.plate_speed_m_s, output_interval_s=c.press.output_interval_s,
                  overlap_limit=c.press.overlap_limit, overlap_action="stop", ranks=point["press"]["ranks"])
+    if c.press.steric_cap_m is not None:
+        press["steric_cap_m"] = c.press.steric_cap_m
     data["press"] = press
     parse_scene(data, f"campaign pressure press {data['name']}")
     return data

@@ -51,12 +51,13 @@ def contact_integrator_words(ld: Any) -> list[object]:
     return ["integrator", "substep", ld.contact_substeps]
 
 
-def law_words(scene: Scene) -> list[object]:
+def law_words(scene: Scene, *, steric_cap_m: float | None = None) -> list[object]:
     """The contact law's parameters from the scene, the same for every body the fibers touch
     (fibers: pair_style fiber/dlvo; yarns, side planes, press plate: the fixes): the fluid's
     temperature (kT and the Debye length) and the contact section's Hamaker constant, ionic
     strength, surface potential and cut-off; an absent one keeps the law's default
-    (docs/models/contact.md)."""
+    (docs/models/contact.md). ``steric_cap_m``: the steric servo's saturation h_cap (m; the press
+    stage's ``press.steric_cap_m``), absent: the law's default."""
     fl = scene.fluid or FluidSection()
     out: list[object] = ["temperature", fl.temperature_K]
     c = scene.contact
@@ -65,17 +66,21 @@ def law_words(scene: Scene) -> list[object]:
                             ("psi", c.surface_potential_V), ("h_cut", c.cutoff_m)):
             if value is not None:
                 out += [word, value]
+    if steric_cap_m is not None:
+        out += ["h_cap", steric_cap_m]
     return out
 
 
-def static_body_words(scene: Scene) -> list[object]:
+def static_body_words(scene: Scene, *, steric_cap_m: float | None = None) -> list[object]:
     """The keywords that make yarns (and the ``fiber_yarns`` side planes) act as the laydown
     section sets them: law terms and parameters (:func:`law_words`), integrator, implicit_force
-    mode, Coulomb friction (and its stick damping inside the Newton solve)."""
+    mode, Coulomb friction (and its stick damping inside the Newton solve); ``steric_cap_m`` as
+    in :func:`law_words`."""
     ld = scene.laydown
     assert ld is not None
     newton = ld.yarn_contact_mode == "newton"
-    words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene), *contact_integrator_words(ld),
+    words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene, steric_cap_m=steric_cap_m),
+                           *contact_integrator_words(ld),
                            "implicit_force", "newton" if newton else "impulse",
                            "friction", ld.friction_coefficient]
     if newton and ld.friction_coefficient > 0.0:
@@ -83,10 +88,11 @@ def static_body_words(scene: Scene) -> list[object]:
     return words
 
 
-def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
+def pair_options(scene: Scene, mode: str = "averaged", *, steric_cap_m: float | None = None) -> list[object]:
     """pair_style fiber/dlvo keywords from the scene's contact section; mode: laydown.fiber_contact
     (newton: the contacts inside the fibers' Newton solves, no sub-integration keywords); with
-    ``laydown.fiber_friction_coefficient`` > 0 the fiber-fiber friction and its stick factor."""
+    ``laydown.fiber_friction_coefficient`` > 0 the fiber-fiber friction and its stick factor;
+    ``steric_cap_m`` as in :func:`law_words`."""
     c = scene.contact
     assert c is not None
     out: list[object]
@@ -96,7 +102,7 @@ def pair_options(scene: Scene, mode: str = "averaged") -> list[object]:
         out = ["integrator", c.integrator]
         if c.integrator == "substep":
             out.append(c.substeps)
-    out += ["terms", ident_list(c.terms), *law_words(scene)]
+    out += ["terms", ident_list(c.terms), *law_words(scene, steric_cap_m=steric_cap_m)]
     if c.points_per_element is not None and mode != "newton":
         out += ["points", c.points_per_element]
     ld = scene.laydown
@@ -130,11 +136,13 @@ def lateral_period(scene: Scene) -> tuple[float, float] | None:
     return (dom.hi_m[0] - dom.lo_m[0], dom.hi_m[1] - dom.lo_m[1])
 
 
-def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
+def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str, *,
+                     steric_cap_m: float | None = None) -> None:
     """The sheet's contacts, as the laydown section sets them: the four side planes (``walls``;
     ``fiber_yarns``: fix wall/fiber/dlvo acting as the yarns do; ``periodic``: none), fix
     wall/fiber/yarns on the yarns of ``yarns_file`` (periodic: the tiled yarns, :func:`write_yarns`)
-    and, with a contact section, pair_style fiber/dlvo between fibers."""
+    and, with a contact section, pair_style fiber/dlvo between fibers; ``steric_cap_m`` (the
+    press's) reaches every one of them (:func:`law_words`)."""
     ld = scene.laydown
     assert ld is not None
     planes = side_planes(scene)
@@ -142,7 +150,8 @@ def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
         pass
     elif ld.walls == "fiber_yarns":  # the yarns' law, mode and friction (docs/stages/laydown.md)
         for k, p in enumerate(planes):
-            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, *static_body_words(scene))
+            s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p,
+                      *static_body_words(scene, steric_cap_m=steric_cap_m))
     elif ld.walls == "wall_gran":  # stock LIGGGHTS granular walls (comparison option)
         for name, style, value in WALL_GRAN_MATERIAL:
             s.command("fix", name, "all", "property/global", style, *value)
@@ -153,12 +162,13 @@ def contact_commands(s: LiggghtsInput, scene: Scene, yarns_file: str) -> None:
     else:  # the contact styles' own wall fix, one per plane
         for k, p in enumerate(planes):
             s.command("fix", SIDE_WALL_IDS[k], "all", "wall/fiber/dlvo", "plane", *p, "terms",
-                      ident_list(ld.terms), *law_words(scene), *contact_integrator_words(ld))
+                      ident_list(ld.terms), *law_words(scene, steric_cap_m=steric_cap_m),
+                      *contact_integrator_words(ld))
     s.command("fix", YARNS_FIX, "all", "wall/fiber/yarns", "yarns", file_token(yarns_file),
-              *static_body_words(scene))
+              *static_body_words(scene, steric_cap_m=steric_cap_m))
     c = scene.contact
     if c is not None and c.model == "fiber_dlvo":  # fiber-fiber contact (thesis sec. 2.4)
-        s.command("pair_style", "fiber/dlvo", *pair_options(scene, ld.fiber_contact_mode))
+        s.command("pair_style", "fiber/dlvo", *pair_options(scene, ld.fiber_contact_mode, steric_cap_m=steric_cap_m))
         s.command("pair_coeff", STAR, STAR)
 
 

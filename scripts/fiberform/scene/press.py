@@ -78,6 +78,15 @@ class PressSection(_Section):
         "could not be pressed to the experimental thickness, so their pressing was stopped earlier)",
         default="fail",
     )
+    steric_cap_m: float | None = quantity(
+        "Saturation h_cap of the steric servo's position error (term S1) in every contact of the "
+        "press (fibers, yarns, side planes, plate). The thesis' S1 (eq. 2.35) is not saturated; "
+        "this implementation saturates it at h_cap (docs/models/contact.md section 3), which "
+        "limits the load one contact carries to 2 mu h_cap / t_R^2, about 1e-5 N at the law's "
+        "2 nm: a press pushes fibers into each other beyond that. A larger value lets the "
+        "contacts carry the plate's load (docs/stages/press.md, 'Load per contact'); absent: the "
+        "law's 2 nm, as in the lay-down", "m", default=None, ge=1e-9, le=1e-4,
+    )  # fmt: skip
     restart_interval_s: float = quantity(
         "Simulated time between LIGGGHTS restart files of the press (rounded to whole "
         "output_interval_s; `fiberform press SCENE --resume` continues a killed press from the last "

@@ -246,7 +246,7 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
     s.command("fix", "drag", "all", "fiber/drag", "flow", "uniform", 0.0, 0.0, 0.0,
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
-    contact_commands(s, scene, YARNS_NAME)
+    contact_commands(s, scene, YARNS_NAME, steric_cap_m=pr.steric_cap_m)
     s.command("timestep", p.dt)
     pair = scene.contact is not None and scene.contact.model == "fiber_dlvo"
     s.command("variable", "ovl_yarn", "equal", fix_ref(YARNS_FIX, 3, negate=True))
@@ -269,7 +269,7 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
     if p.restart_every:
         s.command("restart", p.restart_every, step_file_token(RESTART_STEM, RESTART_EXT))
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
-    plate_words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene)] + (
+    plate_words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene, steric_cap_m=pr.steric_cap_m)] + (
         ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
         else contact_integrator_words(ld))
     cx, cy = p.centre
