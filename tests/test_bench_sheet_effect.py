@@ -116,3 +116,18 @@ def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Pat
     assert got["products"]["one_way"] == res["products"]["one_way"]
     assert got["products"]["soft"]["sheet_thickness_above_fabric_m"] == pytest.approx(
         got["rows"][-1]["soft_thickness_above_fabric_m"], rel=1e-9)
+
+    # a reference laid down from another version of the campaign file: accepted when the point's
+    # scene is the same (only the presses changed), refused with exit status 2 when it is not
+    text = (camp / "campaign.yaml").read_text()
+    assert "overlap_limit: 0.2}" in text and "M_A_kg: 2.2e-9" in text
+    (camp / "presses.yaml").write_text(text.replace("overlap_limit: 0.2}", "overlap_limit: 0.3, steric_cap_m: 1.0e-6}"))
+    (camp / "mass.yaml").write_text(text.replace("M_A_kg: 2.2e-9", "M_A_kg: 2.3e-9"))
+    base_cmd = [sys.executable, str(SCRIPT), *cmd[4:-4], "--compare", "--variants", "soft", "--reference-json", str(out)]
+    for name, code in (("presses.yaml", 0), ("mass.yaml", 2)):
+        done = subprocess.run([*base_cmd, "--campaign", str(camp / name), "--out", str(tmp_path / f"soft-{name}.json")],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == code, (name, done.stdout[-2000:] + done.stderr[-2000:])
+    assert "laid down from another scene" in done.stderr, done.stderr[-2000:]
+    assert json.loads((tmp_path / "soft-presses.yaml.json").read_text())["rows"] == got["rows"]
+    assert not (tmp_path / "soft-mass.yaml.json").exists()

@@ -22,7 +22,9 @@ lay-down generates its fibers itself (where the fibers should be the same, the c
 that they are). The lay-downs run at the same time (one-way: ranks processes; two-way: ranks + 1),
 each logging to ``<runs>/<name>.log``; with ``--resume`` they continue from their restart files.
 ``--reference-json`` takes the reference from an earlier results JSON of this script (the same
-point, section and campaign file) instead of laying it down again: its rows give the reference's
+point and section, laid down from the same point scene: the JSON's ``point_scene_sha256`` against
+:func:`point_key` of ``--campaign``, so a campaign file whose presses changed still fits; JSONs
+without it: the same campaign file) instead of laying it down again: its rows give the reference's
 columns at the common times, the products its metrics; the differences of maps, profiles and
 fiber positions need both runs' snapshots and are left out.
 
@@ -77,7 +79,7 @@ from fiberform.fiber_sheet import fiber_com_speeds, frame_fibers, sheet_thicknes
 from fiberform.liggghts_log import Frame, read_dump
 from fiberform.openfoam_case import DRAINAGE_FO, read_patch_history
 from fiberform.products import FABRIC_H5, FIBERS_H5, read_superficial_velocity, read_yarns
-from fiberform.provenance import atomic_write_text, file_hash, machine_info
+from fiberform.provenance import atomic_write_text, file_hash, machine_info, text_hash
 from fiberform.scene import Scene, load_scene
 from fiberform.stages import STAGES, StageContext
 from fiberform.stages.laydown import FLUID_CASE, settle_speed
@@ -107,10 +109,9 @@ def variant_data(base: dict[str, Any], name: str, interval: int) -> dict[str, An
     return data
 
 
-def scenes(campaign: Path, point: str, section: str, ranks: int, restart: float, interval: int,
-           max_time: float | None, runs: Path, variants: list[str]) -> dict[str, Path]:
-    """Write the reference's and the variants' scenes of the campaign point under ``runs``
-    (relative to the working directory, as their output folders)."""
+def point_base(campaign: Path, point: str, section: str, runs: Path) -> dict[str, Any]:
+    """The campaign point's scene data without its press (this script lays down and computes the
+    permeability only), output folder under ``runs``."""
     c = cp.load_campaign(campaign)
     folder = campaign.resolve().parent
     pts = {p.name: p for p in cp.points(c, cp.read_experiments(folder / "experiments.csv"))}
@@ -118,6 +119,24 @@ def scenes(campaign: Path, point: str, section: str, ranks: int, restart: float,
         raise SystemExit(f"--point {point}: allowed {', '.join(pts)}")
     base = cp.point_scene(c, pts[point], section, folder, runs)  # type: ignore[arg-type]
     base.pop("press", None)
+    return base
+
+
+def point_key(campaign: Path, point: str, section: str) -> str:
+    """sha256 of the point's scene as :func:`point_base` has it, without name and output folder:
+    what a reference laid down from another version of the campaign file must share with this
+    one (a change of the campaign's presses leaves it as it is)."""
+    base = point_base(campaign, point, section, Path("runs"))
+    for key in ("name", "output_dir"):
+        base.pop(key, None)
+    return text_hash(json.dumps(base, sort_keys=True))
+
+
+def scenes(campaign: Path, point: str, section: str, ranks: int, restart: float, interval: int,
+           max_time: float | None, runs: Path, variants: list[str]) -> dict[str, Path]:
+    """Write the reference's and the variants' scenes of the campaign point under ``runs``
+    (relative to the working directory, as their output folders)."""
+    base = point_base(campaign, point, section, runs)
     base["laydown"].update({"ranks": ranks, "restart_interval_s": restart})
     if max_time is not None:
         base["laydown"]["max_time_s"] = max_time
@@ -365,7 +384,12 @@ def main() -> int:
         if (ref_json.get("point"), ref_json.get("section")) != (a.point, a.section):
             ap.error(f"--reference-json: its point {ref_json.get('point')} {ref_json.get('section')} is not "
                      f"{a.point} {a.section}")
-        if ref_json.get("code", {}).get("campaign_sha256") != file_hash(a.campaign):
+        code = ref_json.get("code", {})
+        if "point_scene_sha256" in code:  # since session 33: the point's scene, presses left out
+            if code["point_scene_sha256"] != point_key(a.campaign, a.point, a.section):
+                ap.error(f"--reference-json: its point {a.point} {a.section} was laid down from another scene "
+                         "than --campaign gives it")
+        elif code.get("campaign_sha256") != file_hash(a.campaign):
             ap.error("--reference-json: it was made from another campaign file than --campaign")
     outs: dict[str, Path] = {}
     for variant in a.variants:
@@ -374,6 +398,8 @@ def main() -> int:
         outs[variant] = a.out or HERE / "results" / f"sheet_effect_{a.point}_{a.section}{suffix}.json"
         if a.reference_json is not None and outs[variant].resolve() == a.reference_json.resolve():
             ap.error(f"--out {outs[variant]}: that is the --reference-json file, which this run reads")
+    # the campaign as it was when the scenes were written (it may change while the lay-downs run)
+    campaign_sha, point_sha = file_hash(a.campaign), point_key(a.campaign, a.point, a.section)
     paths = scenes(a.campaign, a.point, a.section, a.ranks, a.restart, a.interval, a.max_time, runs, a.variants)
     if not a.compare:
         run(paths, a.resume, a.to, with_reference=ref_json is None)
@@ -383,7 +409,8 @@ def main() -> int:
         res.update({"point": a.point, "section": a.section, "ranks": a.ranks, "interval": a.interval,
                     "command": " ".join(sys.argv[1:]), "scenes": {n: str(paths[n]) for n in res["names"]},
                     "code": {"fiberform": package_version(), "git_revision": git_revision(),
-                             "build_revision": build_revision(build_dir()), "campaign_sha256": file_hash(a.campaign)},
+                             "build_revision": build_revision(build_dir()), "campaign_sha256": campaign_sha,
+                             "point_scene_sha256": point_sha},
                     "machine": machine_info()})
         print_table(res)
         for name, got in res["products"].items():
