@@ -125,7 +125,8 @@ def test_velocity_mode_stops_at_target_thickness(sheet: Path, fiberform_cmd: lis
         assert "laydown_restart" in h.attrs["input_hashes"]
     for name in ("press.png", "curve.png", "sheet.vtu", "report.md", "sheet.restart"):
         assert (out / name).stat().st_size > 0, name
-    assert "plate stopped at" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "plate stopped at" in report and "h_cap in the press's contacts: the law's 2 nm" in report
 
 
 def test_pressure_mode_follows_its_schedule(sheet: Path, fiberform_cmd: list[str],
@@ -189,7 +190,7 @@ def test_overlap_guard_stops_overpressing(sheet: Path, fiberform_cmd: list[str],
                   "timestep_s: 1.0e-7}", "guard")
     assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-3000:]
     assert "overlap guard" in proc.stderr, proc.stderr[-3000:]
-    assert "overlap_limit" in proc.stderr
+    assert "overlap_limit" in proc.stderr and "raise steric_cap_m" in proc.stderr
     # nothing of the press is left as a product (the stage writes atomically)
     for name in ("press.h5", "press.png", "curve.png", "report.md", "sheet.restart"):
         assert not (out / name).exists(), name

@@ -577,9 +577,10 @@ class Press(Stage):
                     f"overlap), above press.overlap_limit {pr.overlap_limit:g}")
             if pr.overlap_action == "fail":
                 raise StageError(
-                    f"press: overlap guard: {what}: the contact law cannot carry this load (lower "
-                    f"target_pressure_Pa or plate_speed_m_s, raise target_thickness_m, or a smaller "
-                    f"timestep_s, or overlap_action stop; docs/stages/press.md, limits); snapshots "
+                    f"press: overlap guard: {what}: the contact law cannot carry this load (raise "
+                    f"steric_cap_m, lower target_pressure_Pa or plate_speed_m_s, raise "
+                    f"target_thickness_m, or a smaller timestep_s, or overlap_action stop; "
+                    f"docs/stages/press.md, limits); snapshots "
                     f"up to there: {work / TRAJ_NAME}")
             guard_stop = f"stopped by the overlap guard (overlap_action stop): {what}"
         else:
@@ -782,6 +783,10 @@ class Press(Stage):
             f"{p.start_overlap_yarn / p.t_min:.3f} x thickness at the start); largest overlaps "
             f"over the run: fiber-fiber {np.nanmax(ovl_fiber):.3f}, fiber-yarn "
             f"{np.nanmax(ovl_yarn):.3f}, plate {np.nanmax(ovl_plate):.3f} (x thickness)",
+            "- steric servo saturation h_cap in the press's contacts: "
+            + (f"{pr.steric_cap_m * 1e6:.3g} um (press.steric_cap_m)" if pr.steric_cap_m is not None else
+               "the law's 2 nm (press.steric_cap_m absent: a contact carries about 1e-5 N; "
+               "docs/stages/press.md, 'Load per contact')"),
             "", "Thickness definitions (docs/stages/press.md): plate = plate height - fabric top "
             "while the plate touches fibers; span = 5-95 % node heights + one fiber width; above the "
             "fabric = 95th percentile of the fibers' upper surfaces - fabric top; solid "
