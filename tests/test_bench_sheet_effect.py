@@ -131,3 +131,12 @@ def test_one_way_and_two_way_of_a_tiny_point(tmp_path: Path, fiberdem_build: Pat
     assert "laid down from another scene" in done.stderr, done.stderr[-2000:]
     assert json.loads((tmp_path / "soft-presses.yaml.json").read_text())["rows"] == got["rows"]
     assert not (tmp_path / "soft-mass.yaml.json").exists()
+
+    # with a reference JSON the variant's fibers are still checked against the reference scene's
+    # (generated here with its fabric and flow)
+    with h5py.File(tmp_path / "runs/se/soft/fibers/fibers.h5", "r+") as f:
+        f["fibers/x"][0, 0] += 1e-6
+    moved = subprocess.run([*base_cmd, "--campaign", str(camp / "campaign.yaml"), "--out", str(tmp_path / "moved.json")],
+                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert moved.returncode != 0 and "different fibers" in moved.stderr, moved.stderr[-2000:]
+    assert not (tmp_path / "moved.json").exists()

@@ -26,7 +26,8 @@ point and section, laid down from the same point scene: the JSON's ``point_scene
 :func:`point_key` of ``--campaign``, so a campaign file whose presses changed still fits; JSONs
 without it: the same campaign file) instead of laying it down again: its rows give the reference's
 columns at the common times, the products its metrics; the differences of maps, profiles and
-fiber positions need both runs' snapshots and are left out.
+fiber positions need both runs' snapshots and are left out. The same-fibers check still runs, on
+the reference scene's fibers generated here with its fabric and flow.
 
 ``--to permeability`` runs the permeability stage on the finished sheets as well (air, the
 campaign scene's settings); ``--max-time`` with ``--resume`` ends the lay-downs at a common time
@@ -228,12 +229,15 @@ def compare(paths: dict[str, Path], variant: str, every: float, bins: int, dt: f
     with h5py.File(out[variant] / FIBERS_H5, "r") as b:
         mass = {variant: b["fibers/mass"][...]}
         fine = {variant: b["fibers/is_fine"][...].astype(bool)}
-        if reference is None:
+        # with a reference JSON: checked against the reference scene's fibers where they are here
+        # (run() generates them with the reference's fabric and flow)
+        if reference is None or (out[REFERENCE] / FIBERS_H5).exists():
             with h5py.File(out[REFERENCE] / FIBERS_H5, "r") as a:
                 same = np.array_equal(a["fibers/x"][...], b["fibers/x"][...])
                 if SAME_FIBERS[variant] and not same:
                     raise SystemExit(f"{REFERENCE} and {variant} generated different fibers: not a controlled comparison")
-                mass[REFERENCE], fine[REFERENCE] = a["fibers/mass"][...], a["fibers/is_fine"][...].astype(bool)
+                if reference is None:
+                    mass[REFERENCE], fine[REFERENCE] = a["fibers/mass"][...], a["fibers/is_fine"][...].astype(bool)
     top = read_yarns(out[REFERENCE] / FABRIC_H5).top
     u_s = read_superficial_velocity(out[REFERENCE] / "flow" / "flow.h5")
     v_settle = settle_speed(sc[REFERENCE], u_s)
