@@ -351,7 +351,7 @@ def _adhesion_run(work: Path, build_dir: Path, terms: str, gap: float) -> dict[s
         f"fix beam all fiber/beam nodes nodes.fib E {E!r} G {G!r} density {RHO!r} shear_factor {KSH!r} clamp clamp",
         "fix drag all fiber/drag flow uniform 0 0 0 gravity 0 0 0",
         f"fix floor all wall/fiber/dlvo plane 0 0 0 0 0 1 terms {terms} implicit_force newton",
-        plate(z_plate, -speed, travel + G0),
+        plate(z_plate, -U_PLATE, travel + G0),
         f"pair_style fiber/dlvo terms {terms} implicit_force newton", "pair_coeff * *",
         f"timestep {DT!r}", f"variable tip equal z[{tip}]", "variable b equal z[2]",
         *thermo, f"run {down + HOLD_STEPS}",
