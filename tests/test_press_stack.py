@@ -185,15 +185,22 @@ def _at(r: dict[str, np.ndarray], step: int) -> int:
     return int(np.nonzero(r["step"] == step)[0][0])
 
 
+def _hold(r: dict[str, np.ndarray]) -> tuple[float, float, float]:
+    """Load per crossing (N), middle-span deflection (m) over the last 100 steps of the hold, and
+    the smallest fiber-fiber surface gap over the run (m). The last 100 steps (20 outputs): the
+    plate force of single steps flickers with the contacts' states, so force and deflection are
+    averaged over them."""
+    k = _at(r, int(r["hold_end"][0]))
+    hold = slice(k - 19, k + 1)
+    return (-float(np.mean(r["fz"][hold])) / N_CROSS, float(np.mean(r["delta"][hold])),
+            float(np.min(r["gap"][: k + 1])))
+
+
 def test_log_cabin_deflection_matches_continuous_beam(runs: dict[str, dict[str, np.ndarray]]) -> None:
     r = runs["steric"]
     assert F_MAX > 3 * P_LOAD and C_BEND > 100 * C_CONTACT
     k = _at(r, int(r["hold_end"][0]))
-    # the last 100 steps of the hold (20 outputs): the plate force of single steps flickers with
-    # the contacts' states, so force and deflection are averaged over them
-    hold = slice(k - 19, k + 1)
-    P = -float(np.mean(r["fz"][hold])) / N_CROSS
-    delta = float(np.mean(r["delta"][hold]))
+    P, delta, _ = _hold(r)
     assert 0.3 * P_LOAD < P < F_MAX / 3, (P, P_LOAD, F_MAX)  # a load the law carries
     expected = P * C_BEND
     layers = (r["top"][0] - r["top"][k]) / 3
@@ -220,15 +227,6 @@ def cap_runs(fiberdem_build: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     base = tmp_path_factory.mktemp("press_cap")
     return {str(c): _run(base / f"cap{c}", fiberdem_build, "steric", travel=TRAVEL_CAP, h_cap=c, lift=False,
                          speed=4 * U_PLATE) for c in (None, H_CAP_PRESS)}
-
-
-def _hold(r: dict[str, np.ndarray]) -> tuple[float, float, float]:
-    """Load per crossing (N), middle-span deflection (m) over the last 100 steps of the hold, and
-    the smallest fiber-fiber surface gap over the run (m)."""
-    k = _at(r, int(r["hold_end"][0]))
-    hold = slice(k - 19, k + 1)
-    return (-float(np.mean(r["fz"][hold])) / N_CROSS, float(np.mean(r["delta"][hold])),
-            float(np.min(r["gap"][: k + 1])))
 
 
 def test_steric_cap_carries_a_press_load(cap_runs: dict[str, dict[str, np.ndarray]]) -> None:

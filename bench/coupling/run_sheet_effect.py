@@ -381,6 +381,8 @@ def main() -> int:
     runs = a.runs or Path("runs") / f"sheet-effect-{a.point}-{a.section}"
     if runs.is_absolute():
         ap.error("--runs: give a folder relative to the working directory")
+    # the campaign as it was when the scenes were written (it may change while the lay-downs run)
+    campaign_sha, point_sha = file_hash(a.campaign), point_key(a.campaign, a.point, a.section)
     ref_json = None
     if a.reference_json is not None:
         ref_json = json.loads(a.reference_json.read_text())
@@ -390,10 +392,10 @@ def main() -> int:
                      f"{a.point} {a.section}")
         code = ref_json.get("code", {})
         if "point_scene_sha256" in code:  # since session 33: the point's scene, presses left out
-            if code["point_scene_sha256"] != point_key(a.campaign, a.point, a.section):
+            if code["point_scene_sha256"] != point_sha:
                 ap.error(f"--reference-json: its point {a.point} {a.section} was laid down from another scene "
                          "than --campaign gives it")
-        elif code.get("campaign_sha256") != file_hash(a.campaign):
+        elif code.get("campaign_sha256") != campaign_sha:
             ap.error("--reference-json: it was made from another campaign file than --campaign")
     outs: dict[str, Path] = {}
     for variant in a.variants:
@@ -402,8 +404,6 @@ def main() -> int:
         outs[variant] = a.out or HERE / "results" / f"sheet_effect_{a.point}_{a.section}{suffix}.json"
         if a.reference_json is not None and outs[variant].resolve() == a.reference_json.resolve():
             ap.error(f"--out {outs[variant]}: that is the --reference-json file, which this run reads")
-    # the campaign as it was when the scenes were written (it may change while the lay-downs run)
-    campaign_sha, point_sha = file_hash(a.campaign), point_key(a.campaign, a.point, a.section)
     paths = scenes(a.campaign, a.point, a.section, a.ranks, a.restart, a.interval, a.max_time, runs, a.variants)
     if not a.compare:
         run(paths, a.resume, a.to, with_reference=ref_json is None)
