@@ -9,6 +9,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 
 from fiberform._versions import build_dir, build_revision
 from fiberform.provenance import read_provenance
+from fiberform.reuse import ADOPTED_NAME
 
 from test_generate import SCENE as GENERATE_SCENE  # noqa: E402 - the generate tests' scene
 
@@ -71,6 +73,7 @@ def test_two_values_by_two_seeds(tmp_path: Path) -> None:
     (["--set", "fibers.length_m=1.0e-3;rm,2.0e-3"], "fibers.length_m"),
     (["--jobs", "0"], "--jobs"),
     (["--jobs", "2", "--submit", "slurm"], "--jobs"),
+    (["--no-share", "--submit", "slurm"], "--no-share"),
 ])
 def test_bad_sweep_exits_2_and_writes_nothing(tmp_path: Path, args: list[str], words: str) -> None:
     (tmp_path / "s.yaml").write_text(SCENE)
@@ -147,3 +150,59 @@ def test_sweep_from_checks_each_variants_own_upstream(tmp_path: Path) -> None:
     r = _ff(tmp_path, "sweep", "s.yaml", "--seeds", "3", "--from", "flow", "--no-run")
     assert r.returncode == 2, r.stdout + r.stderr
     assert "--from flow" in r.stderr and "swf_002" in r.stderr and "fabric" in r.stderr, r.stderr
+
+
+SHARED_SCENE = SCENE.replace("name: sw", "name: sws") + "fabric: {size_x_m: 1.0e-3, size_y_m: 1.0e-3}\n"
+
+
+def _adopted(d: Path, variant: dict[str, Any], folder: str) -> dict[str, Any] | None:
+    f = d / variant["output_dir"] / folder / ADOPTED_NAME
+    return json.loads(f.read_text()) if f.is_file() else None
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_stages_alike_in_every_variant_run_once(tmp_path: Path, jobs: str) -> None:
+    """A stage that several variants would compute from the same inputs runs once, in the first
+    of them, and the others get a copy of its folder (fiberform.reuse.adopt_stages): the fabric
+    of a seed ensemble (generate hashes the seed: each variant generates its own fibers); the
+    fibers of a sweep over a fabric field at one seed (the fabrics differ: each its own). With
+    --no-share every variant runs everything itself. Checked on the products: a copy is
+    byte-identical to the donor's and records where it came from."""
+    (tmp_path / "s.yaml").write_text(SHARED_SCENE)
+    r = _ff(tmp_path, "sweep", "s.yaml", "--seeds", "3", "--jobs", jobs)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert r.stdout.count("== shared:") == 1 and "shared: fabric of 3 variants" in r.stdout, r.stdout
+    rec = json.loads((tmp_path / "runs" / "sws-sweep" / "sweep.json").read_text())
+    first, *others = rec["variants"]
+    assert _adopted(tmp_path, first, "fabric") is None
+    for v in others:
+        got = _adopted(tmp_path, v, "fabric")
+        assert got is not None and got["adopted_from"] == str((tmp_path / first["output_dir"] / "fabric").resolve())
+        assert (tmp_path / v["output_dir"] / "fabric" / "fabric.h5").read_bytes() == \
+            (tmp_path / first["output_dir"] / "fabric" / "fabric.h5").read_bytes()
+        assert _adopted(tmp_path, v, "fibers") is None
+    fibers = [(tmp_path / v["output_dir"] / "fibers" / "fibers.h5").read_bytes() for v in rec["variants"]]
+    assert len(set(fibers)) == 3
+    # a second sweep finds everything up to date: nothing run, nothing copied again
+    again = _ff(tmp_path, "sweep", "s.yaml", "--seeds", "3", "--jobs", jobs)
+    assert again.returncode == 0, again.stdout[-2000:] + again.stderr[-2000:]
+    assert "[1/1] fabric: up to date" in again.stdout and again.stdout.count("fabric kept") == 2, again.stdout
+
+    d = tmp_path / "by-fabric"
+    d.mkdir()
+    (d / "s.yaml").write_text(SHARED_SCENE)
+    r = _ff(d, "sweep", "s.yaml", "--set", "fabric.md_diameter_m=0.10e-3,0.11e-3", "--jobs", jobs)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert r.stdout.count("== shared:") == 1 and "shared: generate of 2 variants" in r.stdout, r.stdout
+    a, b = json.loads((d / "runs" / "sws-sweep" / "sweep.json").read_text())["variants"]
+    assert _adopted(d, b, "fibers") is not None and _adopted(d, b, "fabric") is None
+    assert (d / a["output_dir"] / "fabric" / "fabric.h5").read_bytes() != \
+        (d / b["output_dir"] / "fabric" / "fabric.h5").read_bytes()
+
+    d = tmp_path / "no-share"
+    d.mkdir()
+    (d / "s.yaml").write_text(SHARED_SCENE)
+    r = _ff(d, "sweep", "s.yaml", "--seeds", "2", "--jobs", jobs, "--no-share")
+    assert r.returncode == 0 and "shared" not in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
+    for v in json.loads((d / "runs" / "sws-sweep" / "sweep.json").read_text())["variants"]:
+        assert _adopted(d, v, "fabric") is None and (d / v["output_dir"] / "fabric" / "fabric.h5").is_file()

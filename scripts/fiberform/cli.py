@@ -216,6 +216,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             raise ConfigError("--jobs: only without --submit (the scheduler runs the job arrays' tasks at once)")
         if args.no_run:
             raise ConfigError("--no-run: not with --submit (--dry-run writes the scripts without submitting)")
+        if args.no_share:
+            raise ConfigError("--no-share: not with --submit (submitted variants run all their stages themselves)")
         opts = executors.batch_options(args.submit, partition=args.partition, account=args.account,
                                        qos=args.qos, time=args.time, nodes=args.nodes, ntasks=args.ntasks)
     else:
@@ -251,7 +253,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                   "cores: the variants will share cores (MPI ranks that wait for each other slow down badly)",
                   file=sys.stderr)
     failed = run_sweep(files, Path(args.build_dir), args.start, args.stop,
-                       lambda line: print(line, flush=True), jobs=args.jobs, resume=args.resume)
+                       lambda line: print(line, flush=True), jobs=args.jobs, resume=args.resume,
+                       share=not args.no_share)
     if failed:
         print(f"fiberform: error: {len(failed)} variant(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
@@ -401,6 +404,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="start", metavar="STAGE", help="as for run")
     p.add_argument("--to", dest="stop", metavar="STAGE", help="as for run (e.g. --to laydown)")
     p.add_argument("--no-run", action="store_true", help="write the variants and sweep.json only")
+    p.add_argument("--no-share", action="store_true",
+                   help="every variant runs all its stages itself (default: a stage that several variants "
+                   "would compute from the same inputs, e.g. the fabric and flow of a seed ensemble, runs "
+                   "once and is copied into the others; not with --submit, whose variants always run their own)")
     p.add_argument("--resume", action="store_true",
                    help="as for run, in every variant: a killed lay-down or press continues from its last "
                    "restart file instead of starting over (serial, with --jobs and in the --submit scripts)")

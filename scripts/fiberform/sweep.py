@@ -10,6 +10,8 @@ dir is ``<base output_dir>-sweep``. Variants then run one after the other throug
 (:func:`fiberform.pipeline.run_pipeline`), each skipped stage by stage when up to date, so a sweep is
 resumed by running the same command again; with ``--jobs N`` up to N variants run at once, each as
 its own ``fiberform run`` process writing ``<sweep dir>/scenes/<name>_<k>.log`` (:func:`run_sweep`).
+Before they run, a stage that several variants would compute from the same inputs runs once and is
+copied into the others (:func:`share_stages`; e.g. the fabric and flow of a seed ensemble).
 ``--resume`` has the meaning of ``fiberform run --resume`` in every variant (a killed lay-down
 continues from its last restart file instead of starting over), whether the variants run here one
 after the other, with ``--jobs`` or as job arrays (``--submit``).
@@ -41,10 +43,10 @@ from .errors import ConfigError, FiberformError
 from .pipeline import StageGraph, applicable_stages, plan_run, run_pipeline
 from .provenance import atomic_write_text, file_hash, read_provenance
 from .scene import load_scene, parse_scene, read_scene_yaml
-from .stages import StageContext
+from .stages import Stage, StageContext
 
-__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "set_field", "submit_sweep",
-           "write_sweep"]
+__all__ = ["SWEEP_JSON", "Variant", "collect", "expand", "parse_set", "run_sweep", "set_field", "share_groups",
+           "share_stages", "submit_sweep", "write_sweep"]
 
 SWEEP_JSON, COLLECT_CSV, COLLECT_PNG = "sweep.json", "collect.csv", "collect.png"
 #: fields a sweep sets itself
@@ -177,12 +179,95 @@ def variant_ranks(files: Sequence[Path], build_dir: Path, start: str | None, sto
     return most
 
 
+def _own_hashes(st: Stage, graph: StageGraph, ctx: StageContext) -> dict[str, str]:
+    """The stage's input hashes without those of the products of its upstream stages (which are
+    shared when the upstream stage is)."""
+    made = {p for up in graph.upstream[st.name] for p in graph.stages[up].product_paths(ctx)}
+    skip = {k for k, p in st.needs(ctx).items() if p in made}
+    return {k: v for k, v in st.input_hashes(ctx).items() if k not in skip}
+
+
+def share_groups(ctxs: Sequence[StageContext], selected: Sequence[str]) -> list[tuple[str, list[int]]]:
+    """The stages (of ``selected``, in pipeline order) that two or more variants would compute
+    alike, and for each the indices of those variants (the first one the donor). Variants share
+    a stage when its own input hashes agree (scene sections of its ``uses``, code version,
+    programs, files the stage reads that no stage makes) and they share every upstream stage of
+    it; so a stage is grouped at most as widely as the stages it reads from."""
+    graphs = [StageGraph(applicable_stages(c.scene), c) for c in ctxs]
+    group_of: dict[str, list[int]] = {}  # stage -> group id per variant (-1: stage absent)
+    out: list[tuple[str, list[int]]] = []
+    for name in graphs[0].order:
+        if name not in selected:
+            continue
+        keys: dict[tuple[Any, ...], int] = {}
+        ids = []
+        for i, (g, c) in enumerate(zip(graphs, ctxs, strict=True)):
+            if name not in g.stages or any(up not in group_of for up in g.upstream[name]):
+                ids.append(-1 - i)  # alone: the stage is absent, or an upstream stage is not shared
+                continue
+            key = (tuple(group_of[up][i] for up in g.upstream[name]),
+                   json.dumps(_own_hashes(g.stages[name], g, c), sort_keys=True))
+            ids.append(keys.setdefault(key, len(keys)))
+        group_of[name] = ids
+        for gid in sorted({i for i in ids if i >= 0}):
+            members = [i for i, x in enumerate(ids) if x == gid]
+            if len(members) > 1:
+                out.append((name, members))
+    return out
+
+
+def share_stages(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
+                 echo: Callable[[str], None], resume: bool = False) -> list[tuple[str, list[int]]]:
+    """Run each stage that several variants would compute alike once, in the first of them, and
+    copy its folder into the others (:func:`fiberform.reuse.adopt_stages`, which copies only
+    where the target's stage then counts as up to date), before the variants run; e.g. the
+    fabric and flow of a seed ensemble, or the lay-down of a sweep over press settings. A donor
+    stage that fails is reported and left to the variants' own runs. Returns the groups shared
+    (:func:`share_groups`)."""
+    from .reuse import adopt_stages
+
+    if len(files) < 2:
+        return []
+    try:
+        ctxs = [StageContext(scene=load_scene(f), scene_path=f, build_dir=build_dir, options={"resume": resume})
+                for f in files]
+        selected = [st.name for st in plan_run(ctxs[0], start, stop, None, require_upstream=False)[0]]
+        groups = share_groups(ctxs, selected)
+    except FiberformError as exc:  # the variants' own runs report it
+        echo(f"sweep: no stage shared ({exc})")
+        return []
+    lacking: dict[int, set[str]] = {i: set() for i in range(len(files))}  # shared stages not up to date
+    for name, members in groups:
+        graph = StageGraph(applicable_stages(ctxs[members[0]].scene), ctxs[members[0]])
+        members = [i for i in members if not lacking[i] & set(graph.upstream[name])]
+        if len(members) < 2:
+            continue
+        donor, ctx = members[0], ctxs[members[0]]
+        echo(f"== shared: {name} of {len(members)} variants runs once in {files[donor].stem} ==")
+        try:
+            run_pipeline(ctx, [graph.stages[name]], set(), echo)
+        except FiberformError as exc:
+            echo(f"shared {name} FAILED in {files[donor].stem} ({exc}); each variant runs it itself")
+            for i in members:
+                lacking[i].add(name)
+            continue
+        for i in members[1:]:
+            a = adopt_stages(ctxs[i], ctx.scene.output_path, [name])[0]
+            echo(f"{files[i].stem}: {name} {a.action}" + (f" ({a.detail})" if a.detail and not a.up_to_date else ""))
+            if not a.up_to_date:
+                lacking[i].add(name)
+    return groups
+
+
 def run_sweep(files: Sequence[Path], build_dir: Path, start: str | None, stop: str | None,
-              echo: Callable[[str], None], jobs: int = 1, resume: bool = False) -> list[str]:
+              echo: Callable[[str], None], jobs: int = 1, resume: bool = False, share: bool = True) -> list[str]:
     """Run each variant's pipeline; returns the names of the variants that failed (the others
-    still run). ``jobs`` > 1: up to that many variants at once (:func:`_run_concurrently`).
-    ``resume``: as ``fiberform run --resume`` (the stage option ``resume``: a killed lay-down
-    continues from its last restart file instead of starting over)."""
+    still run). ``share``: first the stages several variants would compute alike, once each
+    (:func:`share_stages`). ``jobs`` > 1: up to that many variants at once
+    (:func:`_run_concurrently`). ``resume``: as ``fiberform run --resume`` (the stage option
+    ``resume``: a killed lay-down continues from its last restart file instead of starting over)."""
+    if share:
+        share_stages(files, build_dir, start, stop, echo, resume)
     if jobs > 1 and len(files) > 1:
         return _run_concurrently(files, build_dir, start, stop, echo, jobs, resume)
     failed = []
