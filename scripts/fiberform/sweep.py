@@ -194,7 +194,7 @@ def share_groups(ctxs: Sequence[StageContext], selected: Sequence[str]) -> list[
     programs, files the stage reads that no stage makes) and they share every upstream stage of
     it; so a stage is grouped at most as widely as the stages it reads from."""
     graphs = [StageGraph(applicable_stages(c.scene), c) for c in ctxs]
-    group_of: dict[str, list[int]] = {}  # stage -> group id per variant (-1: stage absent)
+    group_of: dict[str, list[int]] = {}  # stage -> group id per variant (negative: alone)
     out: list[tuple[str, list[int]]] = []
     for name in graphs[0].order:
         if name not in selected:
