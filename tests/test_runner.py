@@ -12,6 +12,7 @@ import pytest
 
 from fiberform.errors import ConfigError, RunError
 from fiberform.runner import (
+    ProgressLines,
     build_command,
     build_env,
     capture,
@@ -228,6 +229,42 @@ def test_progress_callback_sees_every_line(tmp_path: Path) -> None:
         raise ValueError("bug in a parser")
 
     run([SH, "-c", "echo a"], Path("log.q"), cwd=tmp_path, progress=broken)
+
+
+def test_progress_lines_when_not_on_a_terminal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                               capfd: pytest.CaptureFixture[str]) -> None:
+    """Without a terminal the parser's fraction goes to standard error as plain lines, at most one
+    per FIBERFORM_PROGRESS_EVERY_S; none with the progress bar or without a parser."""
+    monkeypatch.setenv("FIBERFORM_PROGRESS_EVERY_S", "0.2")
+    thermo = "; ".join(f"echo '{step} 3146 0.5'; sleep 0.3" for step in (100, 200, 300, 400))
+    run([SH, "-c", thermo], Path("log.l"), cwd=tmp_path, progress=liggghts_progress(400),
+        description="press: fiberdem", show_progress=False)
+    err = capfd.readouterr().err.splitlines()
+    assert [ln.split(" %")[0] for ln in err] == [f"press: fiberdem: {p}" for p in ("50.0", "75.0", "100.0")], err
+    assert "left" in err[0] and err[-1].endswith("0 min 00 s left"), err
+    run([SH, "-c", thermo], Path("log.m"), cwd=tmp_path, progress=liggghts_progress(400), show_progress=True)
+    run([SH, "-c", thermo], Path("log.n"), cwd=tmp_path, show_progress=False)
+    assert "after" not in capfd.readouterr().err  # (the bar itself leaves an empty line)
+
+
+def test_progress_lines_interval_and_time_left() -> None:
+    """One line per interval, only when the fraction moved; the time left extrapolates the rate
+    since the first fraction seen (a resumed run starting at 60 %: 10 % in 100 s, 30 % left)."""
+    now = [0.0]
+    out: list[str] = []
+    p = ProgressLines("laydown: fiberdem", out.append, every_s=60.0, clock=lambda: now[0])
+    for t, f in ((1.0, 0.6), (30.0, 0.62), (101.0, 0.7), (120.0, 0.7), (150.0, 0.71), (161.0, 0.7), (162.0, 0.75)):
+        now[0] = t
+        p.update(f)
+    assert out == ["laydown: fiberdem: 70.0 % after 1 min 41 s, about 5 min 00 s left",
+                   "laydown: fiberdem: 75.0 % after 2 min 42 s, about 4 min 28 s left"], out
+    bad: list[str] = []
+    os.environ["FIBERFORM_PROGRESS_EVERY_S"] = "soon"
+    try:
+        ProgressLines("x", bad.append)
+    finally:
+        del os.environ["FIBERFORM_PROGRESS_EVERY_S"]
+    assert bad and "FIBERFORM_PROGRESS_EVERY_S" in bad[0]
 
 
 def test_timeout_ends_the_run(tmp_path: Path) -> None:

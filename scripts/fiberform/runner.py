@@ -14,6 +14,10 @@
   folder, as OpenFOAM's ``runApplication`` does).
 * On a terminal, a rich progress bar shows the fraction reported by an optional ``progress``
   callback that reads log lines (see :func:`liggghts_progress`, :func:`openfoam_progress`).
+  Elsewhere (a log file, a batch job, a sweep's variant log) the same fraction is written to
+  standard error as a plain line every :data:`PROGRESS_EVERY_S` seconds (environment variable
+  ``FIBERFORM_PROGRESS_EVERY_S``), with the time taken and the time left at the rate so far
+  (:class:`ProgressLines`).
 * A non-zero exit raises :class:`~fiberform.errors.RunError` with the command, the exit status and
   the last lines of the log.
 """
@@ -25,6 +29,7 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 from collections import deque
@@ -50,6 +55,8 @@ __all__ = [
     "MPI_ENVIRONMENT",
     "OPENFOAM_PROJECT_DIR",
     "Program",
+    "PROGRESS_EVERY_S",
+    "ProgressLines",
     "ProgressParser",
     "RunResult",
     "build_command",
@@ -180,6 +187,51 @@ def build_env(env_extra: Mapping[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+#: seconds between two plain progress lines when standard error is not a terminal (default of
+#: the environment variable ``FIBERFORM_PROGRESS_EVERY_S``)
+PROGRESS_EVERY_S = 300.0
+
+
+def _duration(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 3600} h {s % 3600 // 60:02d} min" if s >= 3600 else f"{s // 60} min {s % 60:02d} s"
+
+
+class ProgressLines:
+    """Plain progress lines for a log (standard error not a terminal): at most one per ``every_s``
+    seconds, and only when the fraction has moved, e.g. ``fiberdem: 42.0 % after 12 min 05 s,
+    about 16 min 40 s left``. The time left extrapolates the rate since the first fraction seen
+    (a resumed run starts at its restart's fraction). ``clock``: for tests."""
+
+    def __init__(self, name: str, write: Callable[[str], None], every_s: float | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if every_s is None:
+            env = os.environ.get("FIBERFORM_PROGRESS_EVERY_S", "")
+            try:
+                every_s = float(env) if env else PROGRESS_EVERY_S
+            except ValueError:
+                write(f"FIBERFORM_PROGRESS_EVERY_S={env!r} is not a number of seconds: progress every "
+                      f"{PROGRESS_EVERY_S:g} s")
+                every_s = PROGRESS_EVERY_S
+        self.name, self.write, self.every_s, self.clock = name, write, max(0.0, every_s), clock
+        self.start = clock()
+        self.first: tuple[float, float] | None = None  # (time, fraction) of the first fraction seen
+        self.last_t, self.last_frac = self.start, -1.0
+
+    def update(self, frac: float) -> None:
+        now = self.clock()
+        if self.first is None:
+            self.first = (now, frac)
+        if now - self.last_t < self.every_s or frac <= self.last_frac:
+            return
+        self.last_t, self.last_frac = now, frac
+        line = f"{self.name}: {100.0 * frac:.1f} % after {_duration(now - self.start)}"
+        t0, f0 = self.first
+        if frac > f0 and now > t0:
+            line += f", about {_duration((1.0 - frac) * (now - t0) / (frac - f0))} left"
+        self.write(line)
+
+
 def _progress_display(description: str, console: Console) -> Progress:
     return Progress(
         SpinnerColumn(),
@@ -211,7 +263,8 @@ def run(
     """Run ``cmd`` (on ``ranks`` MPI ranks), stream its output into ``log``, raise on failure.
 
     ``log`` is relative to ``cwd`` if not absolute. ``show_progress`` defaults to "stderr is a
-    terminal". ``timeout_s`` ends the whole process group when exceeded.
+    terminal"; without it, a ``progress`` parser's fraction goes to standard error as plain lines
+    (:class:`ProgressLines`). ``timeout_s`` ends the whole process group when exceeded.
     """
     full = build_command(cmd, ranks, oversubscribe)
     env = build_env(env_extra)
@@ -250,6 +303,8 @@ def run(
         task = display.add_task(name, total=1.0 if progress else None)
         parser = progress
         done = 0.0
+        lines = None if show_progress or progress is None else ProgressLines(
+            name, lambda text: print(text, file=sys.stderr, flush=True))
         timed_out = threading.Event()
 
         def on_timeout() -> None:
@@ -277,6 +332,8 @@ def run(
                     if frac is not None and frac > done:
                         done = min(1.0, frac)
                         display.update(task, completed=done)
+                        if lines is not None:
+                            lines.update(done)
             returncode = proc.wait()
         except BaseException:
             _kill(proc)

@@ -264,7 +264,8 @@ class Stage(abc.ABC):
         times: dict[str, float] = {}
         for prog in self.programs(ctx):
             res = run(list(prog.argv), prog.log, cwd=prog.cwd, ranks=prog.ranks, progress=prog.progress,
-                      oversubscribe=ctx.oversubscribe, description=prog.log.name.removeprefix("log."),
+                      oversubscribe=ctx.oversubscribe,
+                      description=f"{self.name}: {prog.log.name.removeprefix('log.')}",
                       show_progress=ctx.show_progress)
             times[self.log_key(ctx, prog.log)] = res.elapsed_s
         self.collect(ctx, h5, tmp, hashes, times)
