@@ -187,13 +187,13 @@ def _own_hashes(st: Stage, graph: StageGraph, ctx: StageContext) -> dict[str, st
     return {k: v for k, v in st.input_hashes(ctx).items() if k not in skip}
 
 
-def share_groups(ctxs: Sequence[StageContext], selected: Sequence[str]) -> list[tuple[str, list[int]]]:
-    """The stages (of ``selected``, in pipeline order) that two or more variants would compute
-    alike, and for each the indices of those variants (the first one the donor). Variants share
+def share_groups(graphs: Sequence[StageGraph], selected: Sequence[str]) -> list[tuple[str, list[int]]]:
+    """The stages (of ``selected``, in pipeline order) that two or more variants (their stage
+    graphs, each with its scene's context) would compute alike, and for each the indices of those
+    variants (the first one the donor). Variants share
     a stage when its own input hashes agree (scene sections of its ``uses``, code version,
     programs, files the stage reads that no stage makes) and they share every upstream stage of
     it; so a stage is grouped at most as widely as the stages it reads from."""
-    graphs = [StageGraph(applicable_stages(c.scene), c) for c in ctxs]
     group_of: dict[str, list[int]] = {}  # stage -> group id per variant (negative: alone)
     out: list[tuple[str, list[int]]] = []
     for name in graphs[0].order:
@@ -201,12 +201,12 @@ def share_groups(ctxs: Sequence[StageContext], selected: Sequence[str]) -> list[
             continue
         keys: dict[tuple[Any, ...], int] = {}
         ids = []
-        for i, (g, c) in enumerate(zip(graphs, ctxs, strict=True)):
+        for i, g in enumerate(graphs):
             if name not in g.stages or any(up not in group_of for up in g.upstream[name]):
                 ids.append(-1 - i)  # alone: the stage is absent, or an upstream stage is not shared
                 continue
             key = (tuple(group_of[up][i] for up in g.upstream[name]),
-                   json.dumps(_own_hashes(g.stages[name], g, c), sort_keys=True))
+                   json.dumps(_own_hashes(g.stages[name], g, g.ctx), sort_keys=True))
             ids.append(keys.setdefault(key, len(keys)))
         group_of[name] = ids
         for gid in sorted({i for i in ids if i >= 0}):
@@ -232,20 +232,20 @@ def share_stages(files: Sequence[Path], build_dir: Path, start: str | None, stop
         ctxs = [StageContext(scene=load_scene(f), scene_path=f, build_dir=build_dir, options={"resume": resume})
                 for f in files]
         selected = [st.name for st in plan_run(ctxs[0], start, stop, None, require_upstream=False)[0]]
-        groups = share_groups(ctxs, selected)
+        graphs = [StageGraph(applicable_stages(c.scene), c) for c in ctxs]
+        groups = share_groups(graphs, selected)
     except FiberformError as exc:  # the variants' own runs report it
         echo(f"sweep: no stage shared ({exc})")
         return []
     lacking: dict[int, set[str]] = {i: set() for i in range(len(files))}  # shared stages not up to date
     for name, members in groups:
-        graph = StageGraph(applicable_stages(ctxs[members[0]].scene), ctxs[members[0]])
-        members = [i for i in members if not lacking[i] & set(graph.upstream[name])]
+        members = [i for i in members if not lacking[i] & set(graphs[i].upstream[name])]
         if len(members) < 2:
             continue
         donor, ctx = members[0], ctxs[members[0]]
         echo(f"== shared: {name} of {len(members)} variants runs once in {files[donor].stem} ==")
         try:
-            run_pipeline(ctx, [graph.stages[name]], set(), echo)
+            run_pipeline(ctx, [graphs[donor].stages[name]], set(), echo)
         except FiberformError as exc:
             echo(f"shared {name} FAILED in {files[donor].stem} ({exc}); each variant runs it itself")
             for i in members:
