@@ -13,6 +13,7 @@ inertia_scale. Run against ``$FIBERFORM_BUILD`` (default ``<root>/build``).
 from __future__ import annotations
 
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from beam_cases import (  # noqa: E402
+    ENV,
     E_WALL,
     G_WALL,
     KSHEAR,
@@ -32,6 +34,7 @@ from beam_cases import (  # noqa: E402
     ellipse_section,
     period_from_crossings,
     run_case,
+    _read_final,
     straight_chain,
 )
 from test_fix_fiber_beam import elastica_tip, first_mode_omega  # noqa: E402
@@ -673,3 +676,61 @@ def test_fiber_friction_holds_a_fiber_on_another(fiberdem_build: Path, tmp_path:
     for fin in (free, held):
         assert np.abs(fin[:11, 1:4] - x0[:11]).max() < 1e-6
         assert np.all(np.isfinite(fin[:, 1:7]))
+
+
+def _split_memory_case(steps: int, restart_every: int = 0) -> Case:
+    """The pair of test_fiber_pair_inside_the_newton_solve at 1e-5 s with at most 4 Newton iterations
+    per attempt (so that the landing steps are split) and `split_memory 5`; a new tangent in every
+    step (tangent_steps 1: the held tangent is not in restart files); the per-step sub-step splits
+    and split-memory start depth (f_beam[16], f_beam[22]) printed to split.txt."""
+    case = _pair_on_plane(10e-6, 20e-6, 1e-5, steps, newton=True,
+                          fix_options="newton_max 4 tangent_steps 1 split_memory 5")
+    case.commands += ["variable sp equal f_beam[16]", "variable sd equal f_beam[22]",
+                      'fix splitlog all print 1 "${sp} ${sd}" file split.txt screen no']
+    if restart_every:
+        case.commands.append(f"restart {restart_every} r.*.restart")
+    return case
+
+
+def test_split_memory_on_two_ranks_and_across_a_restart(fiberdem_build: Path, tmp_path: Path) -> None:
+    """fix fiber/beam `split_memory` (physics/implicit_rod.h remember_split; the memory is per-node
+    state that migrates with the atoms and is written to restart files): on _split_memory_case over
+    10 ms some steps start already split (start depth > 0) and the memory has relaxed to whole
+    steps at the end (the pair at rest); the pair lands as without it, on the closed form (lower
+    fiber's centres r above the plane, upper one 3 r where they cross, within 1 % of r); the same
+    run on 2 ranks (the pair across the rank boundary) ends within 1e-9 m, and a run resumed from
+    its restart file at step 20, while the memory holds split starts, ends identical to the bit to
+    the uninterrupted one (the memory read back with the atoms; zeroed, it ends elsewhere)."""
+    steps, r, k = 1000, 5e-6, 20
+    one = run_case(fiberdem_build, tmp_path / "np1", _split_memory_case(steps, restart_every=k))
+    log = np.loadtxt(tmp_path / "np1" / "split.txt", ndmin=2)  # rows: steps 1, 2, ...
+    assert log[:, 1].max() >= 1, "no step started split: the memory did not act"
+    assert log[k, 1] >= 1, log[:k + 2, 1]  # the step after the restart starts split: memory in the file
+    assert log[-1, 1] == 0, log[-20:, 1]
+    lower, upper = one.final[:11], one.final[11:]
+    assert abs(lower[:, 3] - r).max() < 0.01 * r, lower[:, 3] - r
+    assert abs(upper[5, 3] - 3 * r) < 0.01 * r, upper[5, 3] - 3 * r
+    two = run_case(fiberdem_build, tmp_path / "np2", _split_memory_case(steps), ranks=2)
+    assert np.abs(two.final[:, 1:4] - one.final[:, 1:4]).max() < 1e-9
+    # resumed at step k from the uninterrupted run's restart file: its input with the atoms read
+    # from that file (units, atom style, boundary and newton come with it) and the rest of the run
+    res = tmp_path / "resumed"
+    res.mkdir()
+    for name in ("nodes.fib", f"r.{k}.restart"):
+        (res / name).symlink_to(tmp_path / "np1" / name)
+    text = []
+    for line in (tmp_path / "np1" / "in.case").read_text().splitlines():
+        word = line.split(" ", 1)[0]
+        if word in ("atom_style", "boundary", "newton", "restart"):
+            continue
+        if word == "read_data":
+            line = f"read_restart r.{k}.restart"
+        if word == "run":
+            line = f"run {steps - k}"
+        text.append(line)
+    (res / "in.case").write_text("\n".join(text) + "\n")
+    proc = subprocess.run([str(fiberdem_build / "bin" / "fiberdem"), "-in", "in.case", "-log", "log.case",
+                           "-screen", "none"], cwd=res, env=ENV, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, (res / "log.case").read_text()[-3000:] if (res / "log.case").exists() else proc.stdout
+    resumed = _read_final(res / "final.dump")
+    assert np.array_equal(resumed[:, 1:7], one.final[:, 1:7]), np.abs(resumed[:, 1:7] - one.final[:, 1:7]).max()

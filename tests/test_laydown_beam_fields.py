@@ -55,6 +55,7 @@ def test_defaults_are_the_real_fiber_and_the_implicit_integrator() -> None:
     ("inertia_scale", "inertia_scale", "100.0"),
     ("stiffness_scale", "stiffness_scale", "0.5"),
     ("damping_time_s", "damping", "1.0e-6"),
+    ("split_memory_steps", "split_memory", "20"),
 ])
 def test_each_field_changes_the_fix_line(field: str, key: str, new: str) -> None:
     before = beam_line()

@@ -41,7 +41,7 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "newton_max_iterations": 40, "damping_time_s": 1.0e-6, "yarn_contact": "newton",
         "restart_interval_s": 1.0e-3, "ranks": 2, "fiber_contact": "newton",
         "settle_mass_fraction": 0.99, "tangent_steps": 50, "anderson_depth": 3, "friction_stick": 10.0,
-        "newton_landing": "predict", "fiber_friction_coefficient": 0.4,
+        "newton_landing": "predict", "fiber_friction_coefficient": 0.4, "split_memory_steps": 20,
     },
     "coupling": {"mode": "two_way", "interval": 250, "timeout_s": 60.0, "reaction": "off",
                  "fluid_ranks": 2},

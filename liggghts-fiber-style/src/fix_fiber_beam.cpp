@@ -87,7 +87,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
   scalar_flag = 1;
   extscalar = 1;
   vector_flag = 1;
-  size_vector = 21;
+  size_vector = 22;
   extvector = 0;
   global_freq = 1;
   comm_forward = NSTATIC > kDynamicComm ? NSTATIC : kDynamicComm;
@@ -206,6 +206,9 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
     } else if (std::strcmp(kw, "max_split") == 0) {
       max_split_ = integer_in(iarg, kw, 0, 20);
       iarg += 2;
+    } else if (std::strcmp(kw, "split_memory") == 0) {
+      split_memory_ = integer_in(iarg, kw, 0, 1000000);
+      iarg += 2;
     } else if (std::strcmp(kw, "clamp") == 0) {
       need(iarg, 1, kw);
       const int ig = group->find(arg[iarg + 1]);
@@ -219,7 +222,7 @@ FixFiberBeam::FixFiberBeam(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg, a
       const std::string m = std::string("fix fiber/beam: unknown keyword '") + kw +
                             "' (expected nodes, E, G, density, shear_factor, damping, drag, "
                             "stiffness_scale, inertia_scale, torque, dt_check, integrator, rho_inf, "
-                            "newton_tol, newton_max, tangent_steps, anderson, landing, max_split, clamp)";
+                            "newton_tol, newton_max, tangent_steps, anderson, landing, max_split, split_memory, clamp)";
       error->all(FLERR, fiberform::error_text(m));
     }
   }
@@ -859,11 +862,11 @@ namespace {
 enum SendCol {
   S_TAG = 0, S_FID, S_IDX, S_CNT, S_X, S_Q = S_X + 3, S_V = S_Q + 4, S_W = S_V + 3, S_ACC = S_W + 3,
   S_M = S_ACC + 12, S_J, S_F = S_J + 3, S_T = S_F + 3, S_D = S_T + 3, S_FIXED = S_D + 6, S_ACCOK, S_SCALE,
-  S_RECT, S_HASREF = S_RECT + 2, S_L0, S_G0, S_K0 = S_G0 + 3, S_CG = S_K0 + 3, S_CK = S_CG + 3, S_SRC = S_CK + 3, S_N
+  S_RECT, S_HASREF = S_RECT + 2, S_L0, S_G0, S_K0 = S_G0 + 3, S_CG = S_K0 + 3, S_CK = S_CG + 3, S_SRC = S_CK + 3, S_SPLIT, S_N = S_SPLIT + 2
 };
 // return record layout
 enum RecvCol { R_TAG = 0, R_DX, R_Q = R_DX + 3, R_V = R_Q + 4, R_W = R_V + 3, R_ACC = R_W + 3, R_FI = R_ACC + 12,
-  R_TI = R_FI + 3, R_N = R_TI + 3 };
+  R_TI = R_FI + 3, R_SPLIT = R_TI + 3, R_N = R_SPLIT + 2 };
 }  // namespace
 
 /* ----------------------------------------------------------------------
@@ -967,6 +970,8 @@ void FixFiberBeam::implicit_step() {
       b[S_HASREF] = p[HASREF];
       b[S_L0] = p[L0];
       b[S_SRC] = comm->me;
+      b[S_SPLIT] = p[SPLD];
+      b[S_SPLIT + 1] = p[SPLN];
     }
   }
   if (nprocs == 1) {
@@ -1017,6 +1022,7 @@ void FixFiberBeam::implicit_step() {
   energy_local_ = 0;
   dissipation_local_ = 0;
   for (int k = 0; k < 5; ++k) stat_local_[k] = 0;
+  start_depth_local_ = 0;
   // fibers solved together (contact clusters, set_clusters), each in ascending fiber ID
   std::map<int, std::vector<int>> clusters;
   for (const auto &kv : fibers) {
@@ -1103,7 +1109,19 @@ void FixFiberBeam::implicit_step() {
       entry.used = update->ntimestep;
       held = &entry.tangent;
     }
-    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt, &models_, held);
+    // split memory: the cluster starts at its deepest fiber's remembered depth (physics/implicit_rod.h)
+    rod::SplitMemory mem;
+    if (split_memory_ > 0) {
+      mem = {static_cast<int>(recs[0][S_SPLIT]), static_cast<int>(recs[0][S_SPLIT + 1])};
+      for (size_t f = 1; f + 1 < offsets.size(); ++f) {
+        const double *b0 = recs[static_cast<size_t>(offsets[f])];
+        mem = rod::merge_split(mem, {static_cast<int>(b0[S_SPLIT]), static_cast<int>(b0[S_SPLIT + 1])});
+      }
+      mem.depth = std::min(mem.depth, max_split_);
+      start_depth_local_ = std::max(start_depth_local_, static_cast<double>(mem.depth));
+    }
+    const rod::Stats st = stepper.step(nodes, elems, dt, ga, opt, &models_, held, mem.depth);
+    const rod::SplitMemory next = rod::remember_split(mem, st.start_failed, split_memory_);
     if (!st.ok) {
       double amax = 0, vmax = 0;
       int kmax = 0;
@@ -1156,6 +1174,8 @@ void FixFiberBeam::implicit_step() {
       const bm::Vec3 acc[4] = {nd.ax, nd.aw, nd.vdx, nd.vdw};
       for (int a = 0; a < 4; ++a)
         for (int c = 0; c < 3; ++c) r[R_ACC + 3 * a + c] = acc[a][c];
+      r[R_SPLIT] = next.depth;
+      r[R_SPLIT + 1] = next.calm;
     }
   }
   cluster_.clear();  // set again before every step
@@ -1196,6 +1216,8 @@ void FixFiberBeam::implicit_step() {
     for (int c = 0; c < 12; ++c) p[AX + c] = r[R_ACC + c];
     p[ACCOK] = 1.0;
     for (int c = 0; c < 6; ++c) p[DJ0 + c] = 0.0;
+    p[SPLD] = r[R_SPLIT];
+    p[SPLN] = r[R_SPLIT + 1];
   }
 }
 
@@ -1209,7 +1231,8 @@ void FixFiberBeam::implicit_step() {
    18 mean tangent formations (factorisations) per fiber in the last step, 19 and 20 mean Newton
    iterations and tangent formations per fiber and step since the fix was created, 21 mean Newton
    iterations per fiber and step whose correction a contact model's limiter shortened (landings,
-   docs/models/contact.md section 8), since the fix was created
+   docs/models/contact.md section 8), since the fix was created, 22 deepest start depth of a fiber
+   or cluster in the last step (split memory: the step started as 2^depth sub-steps)
 ------------------------------------------------------------------------- */
 
 double FixFiberBeam::compute_scalar() {
@@ -1257,6 +1280,11 @@ double FixFiberBeam::compute_vector(int n) {
     return gmx;
   }
   if (n == 16) return implicit_ ? rho_inf_ : -1.0;
+  if (n == 21) {
+    double gmx = 0;
+    MPI_Allreduce(&start_depth_local_, &gmx, 1, MPI_DOUBLE, MPI_MAX, world);
+    return gmx;
+  }
   if (n == 18 || n == 19 || n == 20) {
     double all[4];
     MPI_Allreduce(stat_run_, all, 4, MPI_DOUBLE, MPI_SUM, world);
@@ -1327,8 +1355,10 @@ void FixFiberBeam::unpack_restart(int nlocal, int nth) {
   double **extra = atom->extra;
   int m = 0;
   for (int k = 0; k < nth; ++k) m += static_cast<int>(extra[nlocal][m]);
+  // restart files written before the split memory columns (SPLD, SPLN) hold fewer: those start at 0
+  const int stored = static_cast<int>(extra[nlocal][m]) - 1;
   ++m;
-  for (int k = 0; k < NCOL; ++k) node_[nlocal][k] = extra[nlocal][m++];
+  for (int k = 0; k < NCOL; ++k) node_[nlocal][k] = k < stored ? extra[nlocal][m++] : 0.0;
 }
 
 int FixFiberBeam::size_restart(int) { return NCOL + 1; }

@@ -157,6 +157,7 @@ class FixFiberBeam : public Fix {
     FIX, FIY, FIZ, TIX, TIY, TIZ,   // internal force/torque at the current state (spatial)
     ACCOK,                          // 1 once the accelerations above are initialised
     DJ0, DJ1, DJ2, DJ3, DJ4, DJ5,   // -dF/dv of this step's external forces (xx yy zz xy xz yz)
+    SPLD, SPLN,                     // split memory of the node's fiber: start depth, calm steps (rod::SplitMemory)
     NCOL
   };
 
@@ -184,6 +185,8 @@ class FixFiberBeam : public Fix {
   // max_split 12 (was 8): a collapsed fiber's step on a yarn that stalled at 2^8 converged at
   // 2^10 (tests/test_laydown.py ribbons, session 22; converging runs are unchanged)
   int newton_max_ = 25, max_split_ = 12;
+  int split_memory_ = 0;        // calm steps before a remembered split relaxes one level (keyword split_memory; 0: off)
+  double start_depth_local_ = 0;  // deepest start depth of a fiber or cluster in the last step
   int anderson_ = 0;            // Anderson mixing depth of the Newton corrections (keyword anderson; 0: off)
   bool land_predict_ = false;   // landing predictor of the contact corrections (keyword landing predict|limit)
   int tangent_steps_ = 50;      // a factored tangent serves at most this many steps (keyword tangent_steps)

@@ -428,6 +428,77 @@ void test_tangent_reuse_contact() {
               "%ld (new tangent every step)\n", vmax / v0, iters[1], iters[0]);
 }
 
+
+// Split memory (rod::remember_split, rod::merge_split, Stepper::step's first_depth):
+// * the policy: one level deeper after a step none of whose sub-steps converged whole, not calm
+//   when some failed, one level coarser after `relax_after` calm steps, nothing remembered with
+//   relax_after 0; a cluster takes its deepest fiber's memory;
+// * free flight under a constant force is exactly quadratic in time (test_free_node), so a step
+//   started as 8 sub-steps lands on the closed form too;
+// * the impact of test_contact_weighting made hard (v0 = 0.2 m/s, 4 Newton iterations per
+//   attempt): a step that fails whole and is split gives to the bit the state of the step started
+//   as two halves (each split further alike), and the started one does not pay the failed
+//   attempt's iterations.
+void test_split_memory() {
+  using rod::SplitMemory;
+  const auto same = [](SplitMemory a, int d, int c) { return a.depth == d && a.calm == c; };
+  expect(same(rod::remember_split({0, 0}, 1, 0), 0, 0), "split memory: off with relax_after 0");
+  expect(same(rod::remember_split({0, 4}, 1, 5), 1, 0) && same(rod::remember_split({2, 2}, 4, 5), 3, 0),
+         "split memory: no sub-step converged whole: one level deeper");
+  expect(same(rod::remember_split({2, 3}, 3, 5), 2, 0), "split memory: some sub-steps failed: not calm");
+  expect(same(rod::remember_split({2, 3}, 0, 5), 2, 4), "split memory: a calm step is counted");
+  expect(same(rod::remember_split({2, 4}, 0, 5), 1, 0), "split memory: one level coarser after 5 calm steps");
+  expect(same(rod::remember_split({0, 4}, 0, 5), 0, 5), "split memory: whole steps stay whole");
+  expect(same(rod::merge_split({1, 9}, {2, 7}), 2, 7) && same(rod::merge_split({2, 3}, {2, 7}), 2, 3),
+         "split memory: a cluster takes the deepest, least calm memory");
+
+  const rod::GenAlpha g = rod::gen_alpha(0.5);
+  std::vector<rod::Element> none;
+  {
+    rod::Options opt;
+    opt.tol = 1e-12;
+    const double m = 2e-9, h = 1e-4, Fz = -3e-6;
+    std::vector<rod::Node> nodes{free_node(m, {1e-18, 1e-18, 1e-18})};
+    nodes[0].v = {1e-3, 0, 2e-3};
+    nodes[0].F = {0, 0, Fz};
+    rod::Stepper st;
+    st.initialise(nodes, none, opt);
+    const rod::Stats r = st.step(nodes, none, h, g, opt, nullptr, nullptr, 3);
+    const double z = 2e-3 * h + 0.5 * Fz / m * h * h, vz = 2e-3 + Fz / m * h;
+    expect(r.ok && r.splits == 7 && r.depth == 3, "split memory: started as 8 sub-steps", r.splits, 7);
+    expect(std::fabs(nodes[0].x.z - z) < 1e-12 * std::fabs(z) + 1e-20 && std::fabs(nodes[0].x.x - 1e-3 * h) < 1e-20 &&
+               std::fabs(nodes[0].v.z - vz) < 1e-12 * std::fabs(vz),
+           "split memory: free flight in 8 sub-steps = closed form", nodes[0].x.z, z);
+  }
+  const double m = 2.36e-10, h = 1e-5, t_R = 1e-7, k = 2.0 * m / (t_R * t_R), c = 2e-9, v0 = 0.2;
+  rod::Options opt;
+  opt.tol = 1e-12;
+  opt.max_iter = 4;
+  UnilateralSpring spring(k, c);
+  std::vector<rod::NodeForceModel *> models{&spring};
+  std::vector<rod::Node> a{free_node(m, {1e-18, 1e-18, 1e-18})};
+  a[0].x = {0, 0, 0.3 * v0 * h};
+  a[0].v = {0, 0, -v0};
+  rod::Stepper sa, sb;
+  sa.initialise(a, none, opt);
+  std::vector<rod::Node> b = a;
+  const rod::Stats ra = sa.step(a, none, h, g, opt, &models);
+  const rod::Stats rb = sb.step(b, none, h, g, opt, &models, nullptr, 1);
+  double dx = 0, dv = 0;
+  if (ra.ok && rb.ok) {
+    dx = beam::norm(a[0].x - b[0].x);
+    dv = beam::norm(a[0].v - b[0].v);
+  }
+  expect(ra.ok && ra.depth >= 1, "split memory: the hard impact step is split", ra.depth, 1);
+  expect(rb.ok && dx == 0.0 && dv == 0.0, "split memory: the started step = the split one, to the bit", dx, 0.0);
+  expect(ra.start_failed == 1 && rb.start_failed >= 0 && rb.start_failed <= 2,
+         "split memory: failed sub-steps of the start level counted", static_cast<double>(ra.start_failed), 1);
+  expect(rb.iterations + opt.max_iter <= ra.iterations, "split memory: without the failed attempt's iterations",
+         static_cast<double>(rb.iterations), static_cast<double>(ra.iterations));
+  std::printf("split memory: impact at %.2f m/s split to depth %d (%d sub-steps beyond one, %ld Newton iterations); "
+              "started as two halves: %ld iterations, difference %.1e m\n",
+              v0, ra.depth, ra.splits, ra.iterations, rb.iterations, dx);
+}
 }  // namespace
 
 // The element tangent (analytic translation and rotation columns for elastic elements, finite
@@ -513,5 +584,6 @@ int main() {
   test_contact_weighting();
   test_tangent_reuse();
   test_tangent_reuse_contact();
+  test_split_memory();
   return fiberform::check::finish("test_implicit_rod");
 }

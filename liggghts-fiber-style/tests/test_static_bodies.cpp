@@ -7,7 +7,8 @@
    reactions of a beam on two supports (statics); Coulomb friction on a plane holds below mu N and
    slides at (F_t - mu N)/M above it. The rectangular contact section of a collapsed fiber against
    the closed forms of a rectangle (extent along a direction; gaps to a yarn and a plane). The
-   per-step candidate lists of the yarn search give exactly the full lookup's hits. */
+   per-step candidate lists of the yarn search give exactly the full lookup's hits. A moving plane
+   met where it is at the end of each sub-step of a split step. */
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -115,6 +116,38 @@ void test_rect_sections() {
   StaticContactModel on_plane(pl, law, 0.0);
   on_plane.evaluate(flat.nodes, F, nullptr);
   expect(std::fabs(on_plane.min_gap() - 7e-9) < 1e-15, "flat ribbon on a plane: gap from its face", on_plane.min_gap(), 7e-9);
+}
+
+// A moving plane inside a split step (rod::NodeForceModel::begin_whole_step): its point is where it
+// is at the whole step's end, so a sub-step [t0, t0 + h] of a step of length H meets it v (H - t0 - h)
+// back along its motion. A plate 20 nm above a fiber moving down at 20 mm/s (the press), step 1 us:
+// the first half-step sees the gap 10 nm larger than the whole step, the same gap as a plane put
+// there (closed form of the motion), the second half-step the whole step's gap.
+void test_moving_plane_in_sub_steps() {
+  using fiberform::testing::make_fiber;
+  const double r = 10e-6, H = 1e-6, u = 0.02, g0 = 20e-9;
+  fiberform::testing::Fiber f = make_fiber(4, 80e-6, r, 0.6 * r, {0, 0, 0});
+  StaticBodies moving, placed;
+  moving.add_plane({0, 0, r + g0}, {0, 0, -1}, {0, 0, -u});
+  placed.add_plane({0, 0, r + g0 + 0.5 * H * u}, {0, 0, -1});
+  const ContactLaw law;
+  StaticContactModel m(moving, law, 0.0), p(placed, law, 0.0);
+  std::vector<Vec3> F(f.nodes.size());
+  m.begin_whole_step(H);
+  m.begin_step(f.nodes, 0.0, 0.5 * H);
+  m.evaluate(f.nodes, F, nullptr);
+  p.begin_whole_step(H);
+  p.begin_step(f.nodes, 0.0, 0.5 * H);
+  p.evaluate(f.nodes, F, nullptr);
+  expect(std::fabs(m.min_gap() - (g0 + 0.5 * H * u)) < 1e-15 && std::fabs(m.min_gap() - p.min_gap()) < 1e-15,
+         "moving plane: the first half-step meets it half a step back", m.min_gap(), g0 + 0.5 * H * u);
+  m.begin_step(f.nodes, 0.5 * H, 0.5 * H);
+  m.evaluate(f.nodes, F, nullptr);
+  expect(std::fabs(m.min_gap() - g0) < 1e-15, "moving plane: the second half-step at the step's end", m.min_gap(), g0);
+  m.begin_whole_step(H);
+  m.begin_step(f.nodes, 0.0, H);
+  m.evaluate(f.nodes, F, nullptr);
+  expect(std::fabs(m.min_gap() - g0) < 1e-15, "moving plane: the whole step at its end", m.min_gap(), g0);
 }
 
 using fiberform::testing::Fiber;
@@ -588,6 +621,7 @@ int main() {
   test_candidates();
   test_rect_sections();
   test_gap_gradient();
+  test_moving_plane_in_sub_steps();
   // lay-down fibers (r 5-12 um) from 1 us to 100 us; a 100 um thick fiber at 1 us
   for (double h : {1e-6, 5e-6, 1e-5, 1e-4})
     for (double r : {5e-6, 12e-6}) test_drop_on_yarns(h, r);

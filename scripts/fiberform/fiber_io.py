@@ -209,14 +209,15 @@ def write_nodes_subset(src: Path, dst: Path, fiber_ids: Sequence[int]) -> int:
 
 def laydown_beam_options(ld: Any) -> tuple[object, ...]:
     """The fix fiber/beam keywords of a scene's laydown section (the lay-down and the press both
-    integrate the fibers with them); ``anderson`` and ``landing`` only when not at their
-    defaults, so that inputs without them stay as they were."""
+    integrate the fibers with them); ``anderson``, ``landing`` and ``split_memory`` only when
+    not at their defaults, so that inputs without them stay as they were."""
     return ("inertia_scale", ld.inertia_scale, "stiffness_scale", ld.stiffness_scale,
             "damping", ld.damping_time_s, "integrator", ld.beam_integrator,
             "rho_inf", ld.rho_inf, "newton_tol", ld.newton_tolerance,
             "newton_max", ld.newton_max_iterations, "tangent_steps", ld.tangent_steps,
             *(("anderson", ld.anderson_depth) if ld.anderson_depth else ()),
-            *(("landing", ld.newton_landing) if ld.newton_landing != "limit" else ()))
+            *(("landing", ld.newton_landing) if ld.newton_landing != "limit" else ()),
+            *(("split_memory", ld.split_memory_steps) if ld.split_memory_steps else ()))
 
 
 def fiber_preamble(s: LiggghtsInput, f: Any, newton: bool, *beam_options: object,

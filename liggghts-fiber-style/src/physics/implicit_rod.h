@@ -52,7 +52,13 @@
    A step whose iteration does not converge (tolerance on the corrections: translations relative
    to the section radius, rotations in radians) or produces non-finite numbers is restarted from
    the saved state as two half steps, recursively up to max_split levels; if that fails the step
-   reports failure (the caller stops the run: never silently accepted). */
+   reports failure (the caller stops the run: never silently accepted).
+   Split memory (Stepper::step's first_depth, SplitMemory): a step may start already divided into
+   2^d equal sub-steps, each then split further as above. A step that fails whole and converges as
+   two halves gives to the bit what a step started at d = 1 gives, without the failed attempt; the
+   caller remembers that none of a step's sub-steps converged whole (remember_split: one level
+   deeper) and starts the next ones there, trying one level coarser after a number of steps none
+   of whose sub-steps failed. */
 #ifndef FIBERFORM_PHYSICS_IMPLICIT_ROD_H
 #define FIBERFORM_PHYSICS_IMPLICIT_ROD_H
 
@@ -194,6 +200,9 @@ class NodeForceModel {
     (void)fibers;
     (void)offsets;
   }
+  // called once per step, before its attempts, with the whole step's length H (s): its sub-steps
+  // (begin_step's t0, h) span [t0, t0 + h] of [0, H]
+  virtual void begin_whole_step(double H) { (void)H; }
   // called at the start of every attempt of a (sub-)step of length h (s) that begins t0 (s) after
   // the start of the whole step, with the nodes' state at the start of the sub-step
   virtual void begin_step(const std::vector<Node> &start, double t0, double h) {
@@ -254,10 +263,39 @@ struct Stats {
   long predicted = 0;    // contacts the landing predictor linearised (Options::land_predict)
   int splits = 0;        // sub-steps beyond one (0: the step converged whole)
   int depth = 0;         // deepest halving level used
+  long start_failed = 0; // sub-steps of the level the step started at (first_depth) that were split
   bool ok = true;
   double energy = 0;     // elastic energy at the end (J)
   double dissipation = 0;
 };
+
+// The split memory of a fiber or contact cluster (Stepper::step's first_depth): the halving level
+// its steps start at and how many steps in a row needed no deeper one.
+struct SplitMemory {
+  int depth = 0;
+  int calm = 0;
+};
+
+// The memory after a step that started at m.depth, of whose 2^m.depth sub-steps `failed` did not
+// converge whole (Stats::start_failed): one level deeper when none did (the step is too long
+// throughout, as a press under load); unchanged but not calm when some did (a contact landing in
+// one of them: it needs a tiny sub-step once, and starting every later step as deep would cost
+// far more than the failed attempt saved); one level coarser after `relax_after` steps in a row
+// without a failed sub-step (0: no memory, every step starts whole).
+inline SplitMemory remember_split(SplitMemory m, long failed, int relax_after) {
+  if (relax_after <= 0) return {};
+  if (failed >= (1L << m.depth)) return {m.depth + 1, 0};
+  if (failed > 0) return {m.depth, 0};
+  if (++m.calm >= relax_after && m.depth > 0) return {m.depth - 1, 0};
+  return m;
+}
+
+// The memory of fibers solved together: the deepest start, and of the fibers at that depth the
+// shortest calm run (so the cluster relaxes no sooner than its most recently troubled fiber).
+inline SplitMemory merge_split(SplitMemory a, SplitMemory b) {
+  if (a.depth != b.depth) return a.depth > b.depth ? a : b;
+  return {a.depth, std::min(a.calm, b.calm)};
+}
 
 // One column of the rank-one couplings of the iteration matrix (Stepper::build_couplings).
 struct CouplingColumn {
@@ -348,15 +386,31 @@ class Stepper {
   // models: forces evaluated inside the Newton iteration (may be null or empty).
   // keep: the fiber's factored tangent from earlier steps (may be null: a new one in every step);
   // the step starts on it when it still serves (struct Tangent) and leaves its last one there.
+  // first_depth: start as 2^first_depth equal sub-steps (split memory; at most opt.max_split).
   Stats step(std::vector<Node> &nodes, const std::vector<Element> &elems, double h, const GenAlpha &g,
-             const Options &opt, const std::vector<NodeForceModel *> *models = nullptr, Tangent *keep = nullptr) {
+             const Options &opt, const std::vector<NodeForceModel *> *models = nullptr, Tangent *keep = nullptr,
+             int first_depth = 0) {
     models_ = models;
+    if (models)
+      for (NodeForceModel *m : *models) m->begin_whole_step(h);
     if (keep) std::swap(tg_, *keep);
     else tg_.age = -1;
     Stats st;
     // the start of every halving level (allocated once: advance keeps references into it)
     if (starts_.size() < static_cast<std::size_t>(opt.max_split) + 1) starts_.resize(opt.max_split + 1);
-    st.ok = advance(nodes, elems, 0.0, h, g, opt, 0, st);
+    const int d0 = std::min(std::max(first_depth, 0), std::max(opt.max_split, 0));
+    first_depth_ = d0;
+    if (d0 == 0) {
+      st.ok = advance(nodes, elems, 0.0, h, g, opt, 0, st);
+    } else {
+      // the sub-steps and start times of a step split d0 times (exact: powers of two)
+      starts_[0] = nodes;
+      const long n = 1L << d0;
+      const double hs = std::ldexp(h, -d0);
+      st.splits = static_cast<int>(n - 1);
+      st.ok = true;
+      for (long i = 0; i < n && st.ok; ++i) st.ok = advance(nodes, elems, static_cast<double>(i) * hs, hs, g, opt, d0, st);
+    }
     if (!st.ok) nodes = starts_[0];
     if (!st.ok) tg_.age = -1;
     else if (tg_.age >= 0) ++tg_.age;
@@ -598,6 +652,7 @@ class Stepper {
       tg_.age = -1;
       if (attempt(nodes, start, elems, t0, h, g, opt, st)) return true;
     }
+    if (depth == first_depth_) ++st.start_failed;
     if (depth >= opt.max_split) return false;
     nodes = start;
     ++st.splits;
@@ -1268,6 +1323,7 @@ class Stepper {
   std::vector<beam::NodeState> ns_;  // the nodes' states as the element sees them, at the current iterate
   beam::ElementChordGradient chord_;  // the element's chord derivatives when a tangent is formed
   bool started_held_ = false;  // the current attempt started on a held tangent
+  int first_depth_ = 0;        // the halving level the current step started at (step's first_depth)
   Tangent tg_;  // the iteration matrix in use (exchanged with the caller's in step())
 };
 

@@ -565,8 +565,12 @@ class BodyContactModel : public rod::NodeForceModel {
   BodyContactModel(const ContactLaw &law, double friction, double stick = kStick)
       : law_(law), mu_(friction), stick_(stick) {}
 
-  void begin_step(const std::vector<rod::Node> &start, double, double h) override {
+  void begin_whole_step(double H) override { whole_ = H; }
+  void begin_step(const std::vector<rod::Node> &start, double t0, double h) override {
     h_ = h;
+    // a sub-step ends lag_ before the whole step: a moving plane (its point is where it is at the
+    // whole step's end, StaticBodies::Plane) is met where it is at the sub-step's end
+    lag_ = whole_ > 0.0 ? std::max(0.0, whole_ - (t0 + h)) : 0.0;
     frames_.take(start);
   }
 
@@ -789,6 +793,8 @@ class BodyContactModel : public rod::NodeForceModel {
   double mu_ = 0.0;
   double stick_ = kStick;
   double h_ = 0.0;
+  double whole_ = 0.0;  // the whole step's length (begin_whole_step; 0: not told, no lag)
+  double lag_ = 0.0;    // from the (sub-)step's end to the whole step's end (s)
   SectionFrames frames_;  // the rectangles' frames at the start of the step
 
  private:
@@ -877,7 +883,9 @@ class StaticContactModel : public BodyContactModel {
       const bool rect_a = rect_section(a);
       for (int p = 0; p < static_cast<int>(bodies_.planes().size()); ++p) {
         const Vec3 pn = bodies_.planes()[p].n;
-        const double h = bodies_.plane_gap(p, a.x, rect_a ? node_extent(a, frames_.t2_of(nodes, k), frames_.t3_of(nodes, k), pn) : a.radius);
+        // the plane lag_ before the whole step's end: v lag back along its motion
+        const double h = bodies_.plane_gap(p, a.x, rect_a ? node_extent(a, frames_.t2_of(nodes, k), frames_.t3_of(nodes, k), pn) : a.radius) +
+                         lag_ * dot(bodies_.planes()[p].v, pn);
         if (h < a.radius + margin)
           act(nodes, F, J, static_cast<int>(k), -1, BodyHit{0.0, pn, h, INFINITY, bodies_.planes()[p].v, -1, 0.0});
       }

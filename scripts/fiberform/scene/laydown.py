@@ -154,6 +154,14 @@ class LaydownSection(_Section):
         "earlier ones (0: off; the convergence test is unchanged, so the sheet differs at the level "
         "of the Newton tolerance; docs/bench/laydown.md measures the speed-up)", "1", default=0, ge=0, le=8,
     )  # fmt: skip
+    split_memory_steps: int = quantity(
+        "fix fiber/beam split_memory: a fiber (or contact cluster) whose implicit step had to be "
+        "split starts its next steps split as deep, and tries one level coarser after this many "
+        "steps that needed no deeper split (0: off, every step starts whole and pays the failed "
+        "attempts first). Sub-steps are never longer than without it, so the accuracy is not "
+        "reduced; the trajectory differs at the level of the step's time-discretisation error. "
+        "docs/stages/press.md measures the cost under load", "1", default=0, ge=0, le=1000000,
+    )  # fmt: skip
     newton_landing: Literal["limit", "predict"] = choice(
         "fix fiber/beam landing: a Newton correction that would carry contacts from outside to deep "
         "inside is shortened so that the first of them lands (limit), or solved again with those "
