@@ -25,6 +25,7 @@ import math
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -357,6 +358,41 @@ def test_killed_press_resumes_to_the_same_sheet(sheet: Path, fiberform_cmd: list
     for key in ref:
         if key != "resumed":
             assert np.array_equal(got[key], ref[key], equal_nan=True), (key, np.max(np.abs(got[key] - ref[key])))
+
+
+def test_probe_step_continues_the_press(sheet: Path, fiberform_cmd: list[str], build_dir: Path) -> None:
+    """bench/press/probe_step.py (docs/bench/press.md section 4) resumes a press from its restart
+    file with the stage's own input: with the press's own settings it reaches, 100 steps after the
+    restart step, the plate force the press itself logged there (the same printed digits); a variant with
+    split_memory runs too and reports its per-step rows; a bad variant exits 2 naming the key."""
+    import json
+    import os
+
+    top, fab = _sheet_top(sheet), _fabric_top(sheet)
+    press = (f"{{mode: velocity, plate_speed_m_s: 0.01, target_thickness_m: {0.5 * (top - fab)!r}, "
+             "hold_time_s: 5.0e-4, output_interval_s: 1.0e-4, restart_interval_s: 2.0e-4}")
+    proc = _press(sheet, fiberform_cmd, build_dir, press, "probe")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    log = (sheet / "runs" / NAME / "press" / "work" / "log.fiberdem").read_text()
+    logged = {int(w[0]): float(w[4]) for w in (ln.split() for ln in log.splitlines())
+              if len(w) == 17 and w[0].isdigit()}  # step and plate force fz (press.COLUMNS)
+    assert 300 in logged, sorted(logged)[:10]
+    script = Path(__file__).resolve().parents[1] / "bench" / "press" / "probe_step.py"
+    env = {**os.environ, "FIBERFORM_BUILD": str(build_dir)}
+    out = sheet / "probe.json"
+    run = subprocess.run([sys.executable, str(script), "probe.yaml", "--step", "200", "--time", "1e-4",
+                          "--variant", "timestep=1e-6", "--variant", "timestep=1e-6,split_memory=5",
+                          "--out", str(out)], cwd=sheet, env=env, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-3000:]
+    doc = json.loads(out.read_text())
+    plain, memory = doc["variants"]
+    assert plain["rows"]["step"] == [float(k) for k in range(201, 301)]
+    assert len(memory["rows"]["step"]) == 100
+    assert plain["start_depth"]["max"] == 0
+    assert plain["plate_force_z_N_last"] == logged[300], (plain["plate_force_z_N_last"], logged[300])
+    bad = subprocess.run([sys.executable, str(script), "probe.yaml", "--step", "200", "--variant", "newton_max=0"],
+                         cwd=sheet, env=env, capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "newton_max" in bad.stderr and "[1, 1000]" in bad.stderr, bad.stderr
 
 
 def test_permeability_after_the_press_reads_the_pressed_sheet(sheet: Path, fiberform_cmd: list[str],
