@@ -42,6 +42,7 @@ ALTERNATIVES: dict[str, dict[str, object]] = {
         "restart_interval_s": 1.0e-3, "ranks": 2, "fiber_contact": "newton",
         "settle_mass_fraction": 0.99, "tangent_steps": 50, "anderson_depth": 3, "friction_stick": 10.0,
         "newton_landing": "predict", "fiber_friction_coefficient": 0.4, "split_memory_steps": 20,
+        "steric_cap_m": 1.0e-6,
     },
     "coupling": {"mode": "two_way", "interval": 250, "timeout_s": 60.0, "reaction": "off",
                  "fluid_ranks": 2},
@@ -203,6 +204,31 @@ def test_press_steric_cap_reaches_every_press_contact(walls: str) -> None:
     for ln in pressed:
         words = ln.split()
         assert words.count("h_cap") == 1 and float(words[words.index("h_cap") + 1]) == 3.0e-7, ln
+
+
+@pytest.mark.parametrize("walls", ["wall_fiber_dlvo", "fiber_yarns"])
+def test_laydown_steric_cap_reaches_every_contact_and_the_press(walls: str) -> None:
+    """laydown.steric_cap_m is the h_cap of every contact of the lay-down (pair style, yarns, the
+    four side planes) and, with press.steric_cap_m absent, of every contact of the press; a
+    press.steric_cap_m of its own wins in the press."""
+    from fiberform.stages import press
+
+    data = yaml.safe_load(yaml.safe_dump(BASE))
+    data["laydown"].update({"walls": walls, "yarn_contact": "newton", "fiber_contact": "newton",
+                            "steric_cap_m": 5.0e-7})
+    data["laydown"].pop("contact_integrator")
+    data["contact"].pop("integrator")
+    data["press"] = {"mode": "velocity", "target_thickness_m": 20.0e-6}
+    for press_cap, want in ((None, 5.0e-7), (3.0e-7, 3.0e-7)):
+        if press_cap is not None:
+            data["press"]["steric_cap_m"] = press_cap
+        scene = parse_scene(data, "cap.yaml")
+        laid = _law_lines(laydown.render_input(scene, U_S))
+        assert len(laid) == 6, laid  # pair style, yarns, four side planes
+        plan = press.PressPlan(scene, sheet_top=2.677e-3, fabric_top=2.637e-3, t_min=20e-6)
+        for ln, cap in [(ln, 5.0e-7) for ln in laid] + [(ln, want) for ln in _law_lines(press.build_input(scene, plan))]:
+            words = ln.split()
+            assert words.count("h_cap") == 1 and float(words[words.index("h_cap") + 1]) == cap, ln
 
 
 # ---- permeability (issue 12): every field reaches the box case, the run options or the output --

@@ -18,6 +18,7 @@ own, adds the solver's counters to the thermo output, runs ``--steps`` steps on 
 * mean iterations per fiber and step whose correction the contact limiter shortened (landings;
   ``f_beam[21]``, over the probe).
 
+``--steric-cap H`` sets laydown.steric_cap_m (the steric servo's saturation, m) in every probe;
 ``--anderson M`` sets laydown.anderson_depth (Anderson mixing of the Newton corrections),
 ``--tolerance T`` laydown.newton_tolerance and ``--timestep DT`` laydown.timestep_s in every probe
 (``--steps`` and ``--step`` count steps of the restart's run up to the restart, then of the new
@@ -181,10 +182,12 @@ def run_counted(argv: list[str], cwd: Path, stderr: Path) -> tuple[int, float, f
 
 def probe_fields(anderson: int = 0, tolerance: float | None = None,
                  timestep: float | None = None, landing: str | None = None,
-                 fiber_friction: float | None = None) -> dict[str, Any]:
+                 fiber_friction: float | None = None, steric_cap: float | None = None) -> dict[str, Any]:
     """The scene fields of the options --anderson, --tolerance, --timestep, --landing,
-    --fiber-friction (only those given)."""
+    --fiber-friction, --steric-cap (only those given)."""
     out: dict[str, Any] = {}
+    if steric_cap is not None:
+        out["laydown.steric_cap_m"] = steric_cap
     if fiber_friction is not None:
         out["laydown.fiber_friction_coefficient"] = fiber_friction
     if landing is not None:
@@ -201,7 +204,8 @@ def probe_fields(anderson: int = 0, tolerance: float | None = None,
 def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build: Path, out_root: Path,
               anderson: int = 0, tolerance: float | None = None,
               timestep: float | None = None, landing: str | None = None, *,
-              ranks: int = 1, tag: str = "", fiber_friction: float | None = None) -> dict[str, Any]:
+              ranks: int = 1, tag: str = "", fiber_friction: float | None = None,
+              steric_cap: float | None = None) -> dict[str, Any]:
     """One probe of ``setting`` with ``build``'s fiberdem on ``ranks`` ranks, in the folder of the
     setting (+ ``tag``, e.g. ``-b1-np2``) under ``out_root``: its row."""
     mu, stick = parse_setting(setting)
@@ -214,7 +218,8 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
                          + (f"-tol{tolerance:g}" if tolerance is not None else "")
                          + (f"-dt{timestep:g}" if timestep is not None else "")
                          + (f"-land-{landing}" if landing is not None else "")
-                         + (f"-ff{fiber_friction:g}" if fiber_friction is not None else "") + tag)
+                         + (f"-ff{fiber_friction:g}" if fiber_friction is not None else "")
+                         + (f"-cap{steric_cap:g}" if steric_cap is not None else "") + tag)
     folder.mkdir(parents=True, exist_ok=True)
     for name in ("log.probe", FINAL_DUMP, "traj.dump"):  # nothing of an earlier probe is read
         (folder / name).unlink(missing_ok=True)
@@ -231,7 +236,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
             target.symlink_to((work / name).resolve())
     atomic_write_text(folder / "in.probe", probe_input(run, step, steps, chunk, mu, stick,
                                                                probe_fields(anderson, tolerance, timestep, landing,
-                                                                            fiber_friction)))
+                                                                            fiber_friction, steric_cap)))
     fiberdem = build / "bin" / "fiberdem"
     program = [str(fiberdem), "-in", "in.probe", "-log", "log.probe"]
     argv = build_command(program, ranks)
@@ -243,7 +248,7 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     row: dict[str, Any] = {"run": str(run), "step": step, "steps": steps, "friction": mu,
                            "friction_stick": stick if mu > 0.0 else None, "anderson": anderson,
                            "newton_tolerance": tolerance, "timestep_s": timestep, "landing": landing,
-                           "fiber_friction": fiber_friction,
+                           "fiber_friction": fiber_friction, "steric_cap_m": steric_cap,
                            "exit": code,
                            "wall_s": wall, "folder": str(folder), "build": str(build),
                            "fiberdem": file_hash(fiberdem)}
@@ -367,6 +372,8 @@ def main() -> int:
                     help="laydown.newton_landing in every probe (default: the run's scene)")
     ap.add_argument("--fiber-friction", type=float, default=None, metavar="MU",
                     help="laydown.fiber_friction_coefficient of every probe (default: the run's scene)")
+    ap.add_argument("--steric-cap", type=float, default=None, metavar="H",
+                    help="laydown.steric_cap_m of every probe, m (default: the run's scene)")
     ap.add_argument("--parallel", type=int, default=1, choices=(1, 2), help="probes at once")
     ap.add_argument("--copies", type=int, nargs="+", default=[1], metavar="N",
                     help="run every combination also as N copies at the same time (default 1)")
@@ -388,6 +395,8 @@ def main() -> int:
         return 2
     for s in args.settings:
         parse_setting(s)
+    if args.steric_cap is not None and not 1e-9 <= args.steric_cap <= 1e-4:
+        return bad("--steric-cap", f"H must be 1e-9..1e-4 m (laydown.steric_cap_m), got {args.steric_cap:g}")
     cores = os.cpu_count() or 1
     if not all(1 <= r <= cores for r in args.ranks):
         return bad("--ranks", f"each R must be 1..{cores} (the cores), got {' '.join(map(str, args.ranks))}")
@@ -420,7 +429,7 @@ def main() -> int:
         tag = (f"-b{b}-np{r}" if several else "") + (f"-c{copy}" if side_by_side else "")
         row = run_probe(args.run, args.step, args.steps, args.chunk, setting, builds[b], args.probes,
                         args.anderson, args.tolerance, args.timestep, args.landing, ranks=r, tag=tag,
-                        fiber_friction=args.fiber_friction)
+                        fiber_friction=args.fiber_friction, steric_cap=args.steric_cap)
         row.update({"build_index": b, "repetition": k})
         if side_by_side:
             row.update({"copies": n, "copy": copy})

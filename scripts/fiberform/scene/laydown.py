@@ -154,6 +154,16 @@ class LaydownSection(_Section):
         "earlier ones (0: off; the convergence test is unchanged, so the sheet differs at the level "
         "of the Newton tolerance; docs/bench/laydown.md measures the speed-up)", "1", default=0, ge=0, le=8,
     )  # fmt: skip
+    steric_cap_m: float | None = quantity(
+        "Saturation h_cap of the steric servo's position error (term S1) in every contact of the "
+        "lay-down (fibers, yarns, side planes), as press.steric_cap_m: the thesis' S1 (eq. 2.35) "
+        "is not saturated; this implementation saturates it at h_cap (docs/models/contact.md "
+        "section 3), which limits the load one contact carries to 2 mu h_cap / t_R^2, about "
+        "1e-5 N at the law's 2 nm for a fiber node. Under a high-mass pile-up that is exceeded: a "
+        "fiber end pressed into a yarn or another fiber (docs/validation/table41.md, case C seed "
+        "2). Absent: the law's 2 nm. The press uses this value when press.steric_cap_m is absent",
+        "m", default=None, ge=1e-9, le=1e-4,
+    )  # fmt: skip
     split_memory_steps: int = quantity(
         "fix fiber/beam split_memory: a fiber (or contact cluster) whose implicit step had to be "
         "split starts its next steps split as deep, and tries one level coarser after this many "

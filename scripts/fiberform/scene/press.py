@@ -85,7 +85,8 @@ class PressSection(_Section):
         "limits the load one contact carries to 2 mu h_cap / t_R^2, about 1e-5 N at the law's "
         "2 nm: a press pushes fibers into each other beyond that. A larger value lets the "
         "contacts carry the plate's load (docs/stages/press.md, 'Load per contact'); absent: the "
-        "law's 2 nm, as in the lay-down", "m", default=None, ge=1e-9, le=1e-4,
+        "lay-down's laydown.steric_cap_m, or the law's 2 nm when that is absent too", "m",
+        default=None, ge=1e-9, le=1e-4,
     )  # fmt: skip
     restart_interval_s: float = quantity(
         "Simulated time between LIGGGHTS restart files of the press (rounded to whole "

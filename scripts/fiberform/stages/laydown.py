@@ -174,7 +174,7 @@ def build_input(scene: Scene, steps_per_check: int, checks: int,
     s.command("fix", "drag", "all", "fiber/drag", "flow", "grid", file_token("flow.grid"),
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
-    contact_commands(s, scene, YARNS_NAME)
+    contact_commands(s, scene, YARNS_NAME, steric_cap_m=ld.steric_cap_m)
     # removal of whole fibers below the removal height and the settle counter, every check
     s.command("fix", REMOVE_FIX, "all", "fiber/remove", "below", removal_height(scene),
               "every", steps_per_check)
@@ -530,7 +530,8 @@ class Laydown(Stage):
             "min_element_clearance_m": float(clearances.min()) if len(clearances) else math.inf,
             "grammage_kg_m2": m_sheet / area,
             "approximations": json_list(approximations(scene)),
-            "fiber_contact": ("pair_style fiber/dlvo " + " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode))
+            "fiber_contact": ("pair_style fiber/dlvo " + " ".join(
+                str(v) for v in pair_options(scene, ld.fiber_contact_mode, steric_cap_m=ld.steric_cap_m))
                               if scene.contact is not None else "none"),
             "walls": ld.walls,
             "lateral_period_m": np.array(period if period is not None else (0.0, 0.0), dtype=np.float64),
@@ -820,6 +821,11 @@ def approximations(scene: Scene) -> list[str]:
                           "velocity-level stick/slip, physics/friction.h")
         + "; not part of the thesis' law)",
         "fibers are removed whole when any node passes the removal height",
+        (f"steric servo S1 saturated at h_cap = {ld.steric_cap_m * 1e6:.3g} um in every contact "
+         "(laydown.steric_cap_m; the thesis' S1 is not saturated)" if ld.steric_cap_m is not None else
+         "steric servo S1 saturated at the law's h_cap = 2 nm: one contact carries at most "
+         "2 mu h_cap / t_R^2 (about 1e-5 N for a fiber node; the thesis' S1 is not saturated; "
+         "laydown.steric_cap_m)"),
     ]
     c = scene.contact
     if c is None:
@@ -827,7 +833,8 @@ def approximations(scene: Scene) -> list[str]:
     else:
         newton = ld.fiber_contact_mode == "newton"
         out.append("fiber-fiber contact: pair_style fiber/dlvo " +
-                   " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode)) +
+                   " ".join(str(v) for v in pair_options(scene, ld.fiber_contact_mode,
+                                                         steric_cap_m=ld.steric_cap_m)) +
                    (" (fibers in contact solved together, law at the closest points of element "
                     "centre lines; sections are circles, or the thesis' rectangles 2 a1 x 2 a2 of "
                     "collapsed fibers (contact points moved along the line between the centre "

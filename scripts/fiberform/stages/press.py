@@ -222,6 +222,15 @@ def plan(scene: Scene, root: Path) -> PressPlan:
     return PressPlan(scene, float(np.max(sheet.x[:, 2] + r_node)), yarns.top, t_min, start)
 
 
+def steric_cap(scene: Scene) -> float | None:
+    """The steric servo's saturation h_cap of the press's contacts (m): press.steric_cap_m, else
+    the lay-down's laydown.steric_cap_m (the press goes on with the sheet's law), else None (the
+    law's 2 nm)."""
+    pr, ld = scene.press, scene.laydown
+    assert pr is not None and ld is not None
+    return pr.steric_cap_m if pr.steric_cap_m is not None else ld.steric_cap_m
+
+
 def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> str:
     """The press's LIGGGHTS input (files in the working folder: laydown.restart, fibers.nodes,
     yarns.txt). Every field of the press section acts through here or through PressPlan.
@@ -246,7 +255,7 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
     s.command("fix", "drag", "all", "fiber/drag", "flow", "uniform", 0.0, 0.0, 0.0,
               "fluid_density", fl.density_kg_m3, "viscosity", fl.viscosity_Pa_s,
               "gravity", *fl.gravity_m_s2)
-    contact_commands(s, scene, YARNS_NAME, steric_cap_m=pr.steric_cap_m)
+    contact_commands(s, scene, YARNS_NAME, steric_cap_m=steric_cap(scene))
     s.command("timestep", p.dt)
     pair = scene.contact is not None and scene.contact.model == "fiber_dlvo"
     s.command("variable", "ovl_yarn", "equal", fix_ref(YARNS_FIX, 3, negate=True))
@@ -269,7 +278,7 @@ def build_input(scene: Scene, p: PressPlan, resume_step: int | None = None) -> s
     if p.restart_every:
         s.command("restart", p.restart_every, step_file_token(RESTART_STEM, RESTART_EXT))
     # the plate acts as the yarns do: inside the fibers' Newton solves (newton) or sub-integrated
-    plate_words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene, steric_cap_m=pr.steric_cap_m)] + (
+    plate_words: list[object] = ["terms", ident_list(ld.terms), *law_words(scene, steric_cap_m=steric_cap(scene))] + (
         ["implicit_force", "newton"] if ld.yarn_contact_mode == "newton"
         else contact_integrator_words(ld))
     cx, cy = p.centre
@@ -590,8 +599,8 @@ class Press(Stage):
     def _collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], p: PressPlan,
                  work: Path, yarns: Yarns, wall: float, log_text: str, guard_stop: str = "") -> None:
         scene = ctx.scene
-        pr, dom, f = scene.press, scene.domain, scene.fibers
-        assert pr is not None and dom is not None and f is not None
+        pr, ld, dom, f = scene.press, scene.laydown, scene.domain, scene.fibers
+        assert pr is not None and ld is not None and dom is not None and f is not None
         # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns has them, with
         # each chain shifted so its first node lies in the box, fiber pairs by closest images
         period = lateral_period(scene)
@@ -785,6 +794,8 @@ class Press(Stage):
             f"{np.nanmax(ovl_yarn):.3f}, plate {np.nanmax(ovl_plate):.3f} (x thickness)",
             "- steric servo saturation h_cap in the press's contacts: "
             + (f"{pr.steric_cap_m * 1e6:.3g} um (press.steric_cap_m)" if pr.steric_cap_m is not None else
+               f"{ld.steric_cap_m * 1e6:.3g} um (laydown.steric_cap_m; press.steric_cap_m absent)"
+               if ld.steric_cap_m is not None else
                "the law's 2 nm (press.steric_cap_m absent: a contact carries about 1e-5 N; "
                "docs/stages/press.md, 'Load per contact')"),
             "", "Thickness definitions (docs/stages/press.md): plate = plate height - fabric top "
