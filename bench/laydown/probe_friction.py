@@ -98,6 +98,7 @@ from fiberform._versions import build_revision
 from fiberform.fiber_io import NODES_NAME
 from fiberform.inputs import LiggghtsInput, dump_format, file_token, fix_ref
 from fiberform.liggghts_log import thermo_rows
+from fiberform.liggghts_restart import EARLIER_LOG, read_text_if
 from fiberform.provenance import append_result_rows, atomic_write_text, file_hash, machine_info
 from fiberform.runner import build_command, build_env
 from fiberform.scene import parse_scene
@@ -223,9 +224,14 @@ def run_probe(run: Path, step: int, steps: int, chunk: int, setting: str, build:
     folder.mkdir(parents=True, exist_ok=True)
     for name in ("log.probe", FINAL_DUMP, "traj.dump"):  # nothing of an earlier probe is read
         (folder / name).unlink(missing_ok=True)
-    # the generated fibers less those removed up to the restart, as the stage's own resume writes them
-    laydown.write_nodes_left(work / NODES_NAME, folder / NODES_NAME,
-                             (work / "log.fiberdem").read_text(errors="replace"), step)
+    # the generated fibers less those removed up to the restart, as the stage's own resume writes
+    # them: from the generate stage's nodes file and the whole log (a resumed lay-down's working
+    # nodes file lacks the fibers removed before its own restart step, and its log.fiberdem
+    # starts there: the earlier removals are in EARLIER_LOG)
+    generated = run / "fibers" / NODES_NAME
+    laydown.write_nodes_left(generated if generated.is_file() else work / NODES_NAME, folder / NODES_NAME,
+                             read_text_if(work / EARLIER_LOG) + (work / "log.fiberdem").read_text(errors="replace"),
+                             step)
     for name in (*COPIED, restart.name):
         target = folder / name
         if target.is_symlink() or target.exists():
