@@ -15,8 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from fiberform.fiber_io import Fiber, quat_from_frames, write_fibers_liggghts
+from fiberform.runner import build_env
 
-ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+# the stages' environment (Open MPI's root permission, ranks that yield when idle, WM_PROJECT_DIR):
+# busy-waiting ranks slow 2-rank runs on a loaded 2-core machine by minutes
+ENV = build_env()
 
 # wet pulp fiber wall, order of magnitude (docs/styles/fix_fiber_beam.md)
 E_WALL = 10e9
