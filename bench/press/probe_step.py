@@ -35,7 +35,6 @@ import argparse
 import json
 import math
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -48,8 +47,9 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
 
 from fiberform.errors import ConfigError  # noqa: E402
+from fiberform.liggghts_log import thermo_rows  # noqa: E402
 from fiberform.provenance import atomic_write_text, machine_info  # noqa: E402
-from fiberform.scene import load_scene  # noqa: E402
+from fiberform.scene import Scene, load_scene  # noqa: E402
 from fiberform.stages import press  # noqa: E402
 
 BUILD = Path(os.environ.get("FIBERFORM_BUILD", ROOT / "build")).resolve()
@@ -79,10 +79,9 @@ def parse_variant(text: str) -> dict[str, float]:
     return out
 
 
-def probe_input(scene_path: Path, step: int, variant: dict[str, float], sim_time: float) -> tuple[str, int, float]:
-    """The stage's press input resumed at ``step``, with the variant's beam settings, cut to one
-    run of ``sim_time`` at the variant's step; returns (text, steps, dt)."""
-    scene = load_scene(scene_path)
+def probe_input(scene: Scene, step: int, variant: dict[str, float], sim_time: float) -> tuple[str, int, float]:
+    """The stage's press input of ``scene`` resumed at ``step``, with the variant's beam settings,
+    cut to one run of ``sim_time`` at the variant's step; returns (text, steps, dt)."""
     ld = scene.laydown
     assert ld is not None and scene.press is not None
     update: dict[str, Any] = {}
@@ -115,23 +114,9 @@ def probe_input(scene_path: Path, step: int, variant: dict[str, float], sim_time
     return "\n".join(out) + "\n", steps, dt
 
 
-def thermo_rows(log: str, ncol: int) -> list[list[float]]:
-    """The numeric thermo rows of a LIGGGHTS log with ``ncol`` columns."""
-    rows = []
-    for line in log.splitlines():
-        words = line.split()
-        if len(words) == ncol and re.fullmatch(r"\d+", words[0]):
-            try:
-                rows.append([float(w) for w in words])
-            except ValueError:
-                continue
-    return rows
-
-
-def run_variant(scene_path: Path, step: int, spec: str, sim_time: float) -> dict[str, Any]:
+def run_variant(scene: Scene, step: int, spec: str, sim_time: float) -> dict[str, Any]:
     variant = parse_variant(spec)
-    text, steps, dt = probe_input(scene_path, step, variant, sim_time)
-    scene = load_scene(scene_path)
+    text, steps, dt = probe_input(scene, step, variant, sim_time)
     work = (scene.output_path / "press" / "work").resolve()
     restart = work / f"press.{step}.restart"
     if not restart.is_file():
@@ -151,7 +136,7 @@ def run_variant(scene_path: Path, step: int, spec: str, sim_time: float) -> dict
         raise RuntimeError(f"variant {spec}: fiberdem failed ({proc.returncode}):\n{log[-3000:]}"
                            f"{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
     ncol = len(press.COLUMNS) + len(BEAM)
-    rows = [r for r in thermo_rows(log, ncol) if r[0] > step]
+    rows = [r for r in thermo_rows(log) if len(r) == ncol and r[0] > step]
     its = [r[-4] for r in rows]
     splits = [r[-3] for r in rows]
     tangents = [r[-2] for r in rows]
@@ -185,9 +170,10 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--time {a.time}: must be in [1e-9, 1e-2] s")
         for spec in a.variant:
             parse_variant(spec)
+        scene = load_scene(a.scene)
         results = []
         for spec in a.variant:
-            r = run_variant(a.scene, a.step, spec, a.time)
+            r = run_variant(scene, a.step, spec, a.time)
             print(f"{spec}: {r['steps']} steps in {r['wall_s']:.1f} s; Newton iterations per step "
                   f"{r['newton_iterations_per_fiber_per_step']['min']:.0f}-"
                   f"{r['newton_iterations_per_fiber_per_step']['max']:.0f}, splits per step "

@@ -400,17 +400,12 @@ class Stepper {
     if (starts_.size() < static_cast<std::size_t>(opt.max_split) + 1) starts_.resize(opt.max_split + 1);
     const int d0 = std::min(std::max(first_depth, 0), std::max(opt.max_split, 0));
     first_depth_ = d0;
-    if (d0 == 0) {
-      st.ok = advance(nodes, elems, 0.0, h, g, opt, 0, st);
-    } else {
-      // the sub-steps and start times of a step split d0 times (exact: powers of two)
-      starts_[0] = nodes;
-      const long n = 1L << d0;
-      const double hs = std::ldexp(h, -d0);
-      st.splits = static_cast<int>(n - 1);
-      st.ok = true;
-      for (long i = 0; i < n && st.ok; ++i) st.ok = advance(nodes, elems, static_cast<double>(i) * hs, hs, g, opt, d0, st);
-    }
+    // the 2^d0 sub-steps and their start times (exact: powers of two; d0 = 0: the whole step)
+    if (d0 > 0) starts_[0] = nodes;  // advance saves the start of level d0 only
+    const long n = 1L << d0;
+    const double hs = std::ldexp(h, -d0);
+    st.splits = static_cast<int>(n - 1);
+    for (long i = 0; i < n && st.ok; ++i) st.ok = advance(nodes, elems, static_cast<double>(i) * hs, hs, g, opt, d0, st);
     if (!st.ok) nodes = starts_[0];
     if (!st.ok) tg_.age = -1;
     else if (tg_.age >= 0) ++tg_.age;

@@ -599,8 +599,9 @@ class Press(Stage):
     def _collect(self, ctx: StageContext, h5: h5py.File, tmp: Mapping[str, Path], p: PressPlan,
                  work: Path, yarns: Yarns, wall: float, log_text: str, guard_stop: str = "") -> None:
         scene = ctx.scene
-        pr, ld, dom, f = scene.press, scene.laydown, scene.domain, scene.fibers
-        assert pr is not None and ld is not None and dom is not None and f is not None
+        pr, dom, f = scene.press, scene.domain, scene.fibers
+        assert pr is not None and dom is not None and f is not None
+        cap = steric_cap(scene)
         # periodic x/y: the measures against the yarns tiled as fix wall/fiber/yarns has them, with
         # each chain shifted so its first node lies in the box, fiber pairs by closest images
         period = lateral_period(scene)
@@ -793,11 +794,10 @@ class Press(Stage):
             f"over the run: fiber-fiber {np.nanmax(ovl_fiber):.3f}, fiber-yarn "
             f"{np.nanmax(ovl_yarn):.3f}, plate {np.nanmax(ovl_plate):.3f} (x thickness)",
             "- steric servo saturation h_cap in the press's contacts: "
-            + (f"{pr.steric_cap_m * 1e6:.3g} um (press.steric_cap_m)" if pr.steric_cap_m is not None else
-               f"{ld.steric_cap_m * 1e6:.3g} um (laydown.steric_cap_m; press.steric_cap_m absent)"
-               if ld.steric_cap_m is not None else
-               "the law's 2 nm (press.steric_cap_m absent: a contact carries about 1e-5 N; "
-               "docs/stages/press.md, 'Load per contact')"),
+            + ("the law's 2 nm (press.steric_cap_m absent: a contact carries about 1e-5 N; "
+               "docs/stages/press.md, 'Load per contact')" if cap is None else
+               f"{cap * 1e6:.3g} um (" + ("press.steric_cap_m)" if pr.steric_cap_m is not None else
+                                         "laydown.steric_cap_m; press.steric_cap_m absent)")),
             "", "Thickness definitions (docs/stages/press.md): plate = plate height - fabric top "
             "while the plate touches fibers; span = 5-95 % node heights + one fiber width; above the "
             "fabric = 95th percentile of the fibers' upper surfaces - fabric top; solid "
